@@ -1,0 +1,60 @@
+// WMO collision layer: contact manifold generation for any pair of shapes.
+//
+// Conventions in wmo/types.h. Fast special routines `collide_<shape>_<shape>` work in
+// A's frame (they take B's pose in A's frame); `collide` takes world poses, picks the
+// routine from a [type][type] dispatch table (swapping A and B and flipping the result
+// where only the mirrored routine exists), and returns world-space manifolds.
+#pragma once
+
+#include <vector>
+
+#include "wmo/geometry/shapes.h"
+#include "wmo/types.h"
+
+namespace wmo {
+
+struct CollideSettings {
+  /// Speculative margin (unit: m): points with depth >= -margin are reported, so a
+  /// pair closer than `margin` yields contacts with negative depth. 0 reports touching
+  /// and overlapping pairs only.
+  Real margin = 0;
+  /// Use the fast special routines where they exist. False forces the generic
+  /// GJK/EPA + clipping path (used by tests and benchmarks to compare the two).
+  bool use_special_routines = true;
+  GjkSettings gjk{};
+  EpaSettings epa{};
+};
+
+/// Appends the manifolds of A at `pose_a` against B at `pose_b` (world frame) to `out`:
+/// none when apart (beyond the margin), one for a convex pair, one per touching
+/// triangle or compound child for composite shapes. Returns kUnsupported (appending
+/// nothing) for a pair no routine handles, e.g. plane-plane or mesh-mesh.
+QueryStatus collide(const Shape& a, const Pose& pose_a, const Shape& b, const Pose& pose_b,
+                    std::vector<Manifold>& out, const CollideSettings& settings = {});
+
+/// True if collide() has a routine (special or generic) for this pair of types.
+bool collide_supported(ShapeType a, ShapeType b);
+
+// ---- Special routines, in A's frame. Each returns true and fills `m` if the pair is
+// within `margin`; false (m untouched) otherwise. ----
+bool collide_sphere_sphere(const Sphere& a, const Sphere& b, const Pose& b_in_a, Real margin, Manifold& m);
+bool collide_sphere_box(const Sphere& a, const Box& b, const Pose& b_in_a, Real margin, Manifold& m);
+bool collide_sphere_capsule(const Sphere& a, const Capsule& b, const Pose& b_in_a, Real margin, Manifold& m);
+bool collide_capsule_capsule(const Capsule& a, const Capsule& b, const Pose& b_in_a, Real margin, Manifold& m);
+bool collide_capsule_box(const Capsule& a, const Box& b, const Pose& b_in_a, Real margin, Manifold& m);
+bool collide_box_box(const Box& a, const Box& b, const Pose& b_in_a, Real margin, Manifold& m);
+bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_in_a, Real margin, Manifold& m);
+/// Plane A against any convex shape B.
+bool collide_plane_convex(const Plane& a, const ConvexShape& b, const Pose& b_in_a, Real margin, Manifold& m);
+
+/// Generic convex pair: GJK (distance when apart) / EPA (when overlapping) on the cores
+/// plus radii, then a manifold of up to 4 points by clipping the two supporting faces.
+bool collide_convex_convex(const ConvexShape& a, const ConvexShape& b, const Pose& b_in_a,
+                           const CollideSettings& settings, Manifold& m);
+
+/// Triangle mesh A against convex B: BVH query, one manifold per touching triangle
+/// (child_a = triangle index), with internal-edge correction. Appends to `out`.
+void collide_mesh_convex(const TriangleMesh& a, const ConvexShape& b, const Pose& b_in_a,
+                         const CollideSettings& settings, std::vector<Manifold>& out);
+
+}  // namespace wmo

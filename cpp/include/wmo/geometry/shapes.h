@@ -1,0 +1,302 @@
+// WMO geometry layer: shapes, support maps and mass properties.
+//
+// Every shape lives in its own local frame. Axis conventions: capsules and cylinders
+// are aligned with the local Y axis (Jolt's and Bullet's default); a plane is the
+// half-space { x : dot(normal, x) <= offset }.
+//
+// Convex shapes are "core + radius" (Jolt's convex radius, parry's rounded shapes):
+// a sphere is a point core with radius r, a capsule a segment core with radius r, a
+// rounded box a smaller box core with radius r. GJK runs on the core and adds the
+// radius, so curved shapes are exact rather than sampled.
+//
+// Shapes are immutable after construction and shared through std::shared_ptr<const Shape>,
+// so one shape can be used by many bodies and by Python at once.
+#pragma once
+
+#include <array>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "wmo/math.h"
+#include "wmo/types.h"
+
+namespace wmo {
+
+enum class ShapeType : std::uint8_t {
+  kSphere = 0,
+  kBox,
+  kCapsule,
+  kCylinder,
+  kConvexHull,
+  kTriangleMesh,
+  kPlane,
+  kCompound,
+  kCount
+};
+
+const char* to_string(ShapeType t);
+
+/// Mass properties of a solid shape of uniform density.
+struct MassProperties {
+  Real volume = 0;                          ///< unit: m^3
+  Real mass = 0;                            ///< unit: kg (density * volume)
+  Vec3 center_of_mass = Vec3::Zero();       ///< unit: m, in the shape's local frame
+  Mat3 inertia = Mat3::Zero();              ///< unit: kg m^2, about the centre of mass, local axes
+};
+
+/// Largest coordinate used for the bounding box of an unbounded shape (plane), in
+/// metres. Finite so that broadphase arithmetic (surface areas, sorting) stays finite.
+constexpr Real kUnboundedExtent = 1e9;
+
+class Shape {
+ public:
+  explicit Shape(ShapeType type) : type_(type) {}
+  virtual ~Shape() = default;
+  Shape(const Shape&) = delete;
+  Shape& operator=(const Shape&) = delete;
+
+  ShapeType type() const { return type_; }
+  /// True for sphere, box, capsule, cylinder and convex hull.
+  bool is_convex() const { return type_ <= ShapeType::kConvexHull; }
+
+  /// Bounding box in the shape's local frame (unit: m).
+  virtual Aabb local_aabb() const = 0;
+  /// World bounding box for the shape placed at `pose`. The default transforms the
+  /// local box (Arvo); curved shapes override it with a tight box.
+  virtual Aabb world_aabb(const Pose& pose) const { return local_aabb().transformed(pose); }
+
+  /// True if the shape encloses a volume (all convex shapes and compounds). Planes and
+  /// triangle meshes are not solid.
+  virtual bool is_solid() const { return is_convex(); }
+  /// Mass properties for a uniform density (kg/m^3). Throws InvalidArgument for
+  /// non-solid shapes or a non-positive density.
+  virtual MassProperties mass_properties(Real density) const;
+
+ private:
+  ShapeType type_;
+};
+
+/// Up to kMaxFaceVertices points describing the feature of a convex shape that faces a
+/// direction: a polygon (face), 2 points (edge) or 1 point (vertex), in the local frame,
+/// on the outer surface (radius included). Used to build contact manifolds by clipping.
+constexpr int kMaxFaceVertices = 32;
+struct SupportingFace {
+  int count = 0;
+  std::array<Vec3, kMaxFaceVertices> vertices{};
+  /// Identifies the feature (face index, or a vertex/edge code) for persistent ids.
+  std::uint32_t feature = 0;
+};
+
+/// A convex shape: core + radius. `support` includes the radius, `support_core` does
+/// not. `dir` need not be normalised but must be non-zero; for a zero direction any
+/// point of the shape is returned.
+class ConvexShape : public Shape {
+ public:
+  using Shape::Shape;
+  /// Point of the shape furthest along `dir` (local frame).
+  virtual Vec3 support(const Vec3& dir) const = 0;
+  /// Point of the core furthest along `dir` (local frame).
+  virtual Vec3 support_core(const Vec3& dir) const = 0;
+  /// The convex radius: the shape is the core inflated by this radius (unit: m).
+  Real radius() const { return radius_; }
+  /// The face / edge / vertex whose outward normal is closest to `dir` (local frame).
+  virtual void supporting_face(const Vec3& dir, SupportingFace& face) const = 0;
+
+ protected:
+  Real radius_ = 0;
+};
+
+/// Sphere of radius `radius` centred at the origin. Core: the origin.
+class Sphere final : public ConvexShape {
+ public:
+  explicit Sphere(Real radius);
+  Vec3 support(const Vec3& dir) const override;
+  Vec3 support_core(const Vec3&) const override { return Vec3::Zero(); }
+  void supporting_face(const Vec3& dir, SupportingFace& face) const override;
+  Aabb local_aabb() const override;
+  Aabb world_aabb(const Pose& pose) const override;
+  MassProperties mass_properties(Real density) const override;
+};
+
+/// Box with half extents (hx, hy, hz), optionally rounded: the outer surface stays at
+/// the half extents and the edges are rounded with `rounding` (unit: m), so the core is
+/// a box of half extents - rounding. rounding must be < the smallest half extent.
+class Box final : public ConvexShape {
+ public:
+  explicit Box(const Vec3& half_extents, Real rounding = 0);
+  const Vec3& half_extents() const { return half_extents_; }
+  /// Half extents of the core box (half_extents - rounding).
+  const Vec3& core_half_extents() const { return core_; }
+  Vec3 support(const Vec3& dir) const override;
+  Vec3 support_core(const Vec3& dir) const override;
+  void supporting_face(const Vec3& dir, SupportingFace& face) const override;
+  Aabb local_aabb() const override;
+  MassProperties mass_properties(Real density) const override;
+
+ private:
+  Vec3 half_extents_;
+  Vec3 core_;
+};
+
+/// Capsule along local Y: segment from (0, -half_height, 0) to (0, half_height, 0)
+/// inflated by `radius`. Total length 2 * (half_height + radius).
+class Capsule final : public ConvexShape {
+ public:
+  Capsule(Real radius, Real half_height);
+  Real half_height() const { return half_height_; }
+  Vec3 support(const Vec3& dir) const override;
+  Vec3 support_core(const Vec3& dir) const override;
+  void supporting_face(const Vec3& dir, SupportingFace& face) const override;
+  Aabb local_aabb() const override;
+  Aabb world_aabb(const Pose& pose) const override;
+  MassProperties mass_properties(Real density) const override;
+
+ private:
+  Real half_height_;
+};
+
+/// Solid cylinder along local Y, radius `cylinder_radius`, from y = -half_height to
+/// +half_height. Sharp edges: its convex radius is 0.
+class Cylinder final : public ConvexShape {
+ public:
+  Cylinder(Real cylinder_radius, Real half_height);
+  Real cylinder_radius() const { return cylinder_radius_; }
+  Real half_height() const { return half_height_; }
+  Vec3 support(const Vec3& dir) const override;
+  Vec3 support_core(const Vec3& dir) const override { return support(dir); }
+  void supporting_face(const Vec3& dir, SupportingFace& face) const override;
+  Aabb local_aabb() const override;
+  MassProperties mass_properties(Real density) const override;
+
+ private:
+  Real cylinder_radius_;
+  Real half_height_;
+};
+
+/// Convex hull of a point cloud, built with Quickhull (Barber et al. 1996). Stores the
+/// polytope as a half-edge mesh: vertices, faces (planes with outward unit normals and
+/// a CCW vertex loop), half-edges with twins, and the unique edges, so SAT and face
+/// clipping can walk it. Coplanar triangles are merged into polygonal faces.
+class ConvexHull final : public ConvexShape {
+ public:
+  struct Face {
+    Vec3 normal;          ///< outward unit normal
+    Real offset;          ///< plane: dot(normal, x) = offset
+    int first_edge;       ///< one half-edge of the face's loop
+    int vertex_count;     ///< number of vertices / half-edges in the loop
+  };
+  struct HalfEdge {
+    int origin;  ///< vertex index the half-edge starts at
+    int twin;    ///< opposite half-edge (in the neighbouring face)
+    int next;    ///< next half-edge CCW around `face`
+    int face;    ///< face to the left
+  };
+
+  /// Throws InvalidArgument naming `points` if there are fewer than 4 points, any is
+  /// non-finite, or they are (within a tolerance relative to their extent) coplanar,
+  /// colinear or coincident. Duplicate and interior points are dropped.
+  explicit ConvexHull(const std::vector<Vec3>& points);
+
+  const std::vector<Vec3>& vertices() const { return vertices_; }
+  const std::vector<Face>& faces() const { return faces_; }
+  const std::vector<HalfEdge>& half_edges() const { return half_edges_; }
+  /// One half-edge index per undirected edge (the one with the smaller index of each twin pair).
+  const std::vector<int>& edges() const { return edges_; }
+  /// Vertex indices of face `f`, CCW seen from outside.
+  std::vector<int> face_vertices(int f) const;
+
+  Vec3 support(const Vec3& dir) const override { return support_core(dir); }
+  Vec3 support_core(const Vec3& dir) const override;
+  /// Index of the support vertex.
+  int support_index(const Vec3& dir) const;
+  void supporting_face(const Vec3& dir, SupportingFace& face) const override;
+  Aabb local_aabb() const override { return aabb_; }
+  MassProperties mass_properties(Real density) const override;
+
+ private:
+  std::vector<Vec3> vertices_;
+  std::vector<Face> faces_;
+  std::vector<HalfEdge> half_edges_;
+  std::vector<int> edges_;
+  std::vector<std::vector<int>> vertex_neighbors_;  // for hill-climbing support on large hulls
+  Aabb aabb_;
+};
+
+/// Half-space { x : dot(normal, x) <= offset } (local frame). Not solid, static only.
+class Plane final : public Shape {
+ public:
+  /// `normal` is normalised; throws InvalidArgument if it is zero or not finite.
+  Plane(const Vec3& normal, Real offset);
+  const Vec3& normal() const { return normal_; }
+  Real offset() const { return offset_; }
+  Aabb local_aabb() const override;
+  bool is_solid() const override { return false; }
+
+ private:
+  Vec3 normal_;
+  Real offset_;
+};
+
+class TriangleMeshBvh;  // defined in wmo/geometry/mesh_bvh.h
+
+/// Concave triangle mesh (static geometry). Triangles are CCW seen from outside (the
+/// face normal is (v1-v0)x(v2-v0)). Holds a BVH over its triangles and, for every
+/// triangle edge, whether it is an internal (flat or concave) edge so contacts against
+/// it can be suppressed or corrected (internal-edge handling).
+class TriangleMesh final : public Shape {
+ public:
+  /// Throws InvalidArgument for non-finite vertices, out-of-range indices, or an empty
+  /// mesh. Degenerate (zero-area) triangles are rejected with their index.
+  TriangleMesh(std::vector<Vec3> vertices, std::vector<std::array<int, 3>> triangles);
+  ~TriangleMesh() override;
+
+  const std::vector<Vec3>& vertices() const { return vertices_; }
+  const std::vector<std::array<int, 3>>& triangles() const { return triangles_; }
+  /// Unit normal of triangle t.
+  const Vec3& triangle_normal(int t) const { return normals_[t]; }
+  /// Neighbouring triangle across edge e (edge e goes from vertex e to vertex (e+1)%3)
+  /// of triangle t, or -1 on a boundary.
+  int neighbor(int t, int e) const { return neighbors_[t][e]; }
+  /// True if edge e of triangle t is convex (a real feature that may produce contacts);
+  /// false if it is flat or concave, i.e. internal to the surface.
+  bool edge_is_convex(int t, int e) const { return (convex_edge_bits_[t] >> e) & 1u; }
+  const TriangleMeshBvh& bvh() const { return *bvh_; }
+
+  Aabb local_aabb() const override { return aabb_; }
+  bool is_solid() const override { return false; }
+
+ private:
+  std::vector<Vec3> vertices_;
+  std::vector<std::array<int, 3>> triangles_;
+  std::vector<Vec3> normals_;
+  std::vector<std::array<int, 3>> neighbors_;
+  std::vector<std::uint8_t> convex_edge_bits_;
+  std::unique_ptr<TriangleMeshBvh> bvh_;
+  Aabb aabb_;
+};
+
+/// A rigid set of convex children, each with a pose in the compound's frame.
+class Compound final : public Shape {
+ public:
+  struct Child {
+    std::shared_ptr<const ConvexShape> shape;
+    Pose pose;
+  };
+  /// Throws InvalidArgument if empty or a child is null.
+  explicit Compound(std::vector<Child> children);
+  const std::vector<Child>& children() const { return children_; }
+  Aabb local_aabb() const override { return aabb_; }
+  bool is_solid() const override { return true; }
+  /// Sum of the children's mass properties (parallel-axis theorem). Overlapping
+  /// children are counted twice, as in Bullet and Jolt.
+  MassProperties mass_properties(Real density) const override;
+
+ private:
+  std::vector<Child> children_;
+  Aabb aabb_;
+};
+
+using ShapePtr = std::shared_ptr<const Shape>;
+
+}  // namespace wmo

@@ -1,0 +1,1 @@
+#include "wmo/collision/narrowphase.h"
