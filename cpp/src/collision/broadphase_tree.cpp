@@ -1,0 +1,516 @@
+// Dynamic AABB tree broadphase. The idea is that of Box2D's b2DynamicTree (Catto) and
+// Bullet's btDbvt (Presson); this is WMO's own implementation:
+//
+//   * Leaves store FAT boxes: the tight box grown by a margin and stretched along the
+//     expected displacement. A leaf is reinserted only when its tight box leaves the fat
+//     box (or the fat box has become far larger than needed), so most moves of slowly
+//     moving bodies touch only the proxy table.
+//   * Insertion picks the sibling that minimises the surface area heuristic (SAH: total
+//     surface area of internal nodes, Goldsmith & Salmon 1987, MacDonald & Booth 1990),
+//     found exactly by branch and bound (Bittner, Hapala & Havran 2012, "Fast
+//     insertion-based optimization of bounding volume hierarchies", section 3.1).
+//   * After every insertion and removal the path to the root is rebalanced by AVL-style
+//     single rotations of the taller grandchild (Adelson-Velsky & Landis 1962; the scheme
+//     Box2D v2.4 uses), which bounds the height by O(log n) even for sorted insertions.
+//   * Nodes live in one contiguous pool with an intrusive free list.
+//   * Pairs: a persistent list of candidate pairs (leaves whose FAT boxes overlap) is
+//     kept sorted. update() drops the candidates of leaves whose fat box changed and
+//     re-queries only those leaves (Box2D's move buffer), so the per-frame cost is
+//     O(candidates + reinsertions * log n). query_pairs filters the candidates on the
+//     TIGHT boxes, so the result equals brute force exactly, already in sorted order.
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <iterator>
+#include <string>
+#include <stdexcept>
+#include <vector>
+
+#include "broadphase_internal.h"
+
+namespace wmo {
+namespace {
+
+constexpr std::int32_t kNull = -1;
+
+/// Box2D v2.4's rule: a leaf whose fat box still contains the tight box is nevertheless
+/// reinserted when the fat box exceeds the freshly computed one grown by this many
+/// margins, so a box stretched by an earlier fast motion shrinks back once the body
+/// slows down (fewer false candidates), without reinserting on every small change.
+constexpr Real kShrinkMargins = 4.0;
+
+/// Traversal stack: inline storage for the common case and a heap fallback, so a query
+/// never overflows whatever the tree's shape. An AVL-balanced tree of 2^31 leaves is
+/// < 64 deep and a depth-first traversal holds at most depth + 1 entries, so the
+/// fallback is only a safety net.
+class TraversalStack {
+ public:
+  void push(std::int32_t v) {
+    if (size_ < kInline) {
+      inline_[size_++] = v;
+    } else {
+      overflow_.push_back(v);
+      ++size_;
+    }
+  }
+  std::int32_t pop() {
+    --size_;
+    if (size_ >= kInline) {
+      const std::int32_t v = overflow_.back();
+      overflow_.pop_back();
+      return v;
+    }
+    return inline_[size_];
+  }
+  bool empty() const { return size_ == 0; }
+
+ private:
+  static constexpr std::size_t kInline = 128;
+  std::array<std::int32_t, kInline> inline_;
+  std::vector<std::int32_t> overflow_;
+  std::size_t size_ = 0;
+};
+
+class AabbTreeBroadphase final : public Broadphase {
+ public:
+  explicit AabbTreeBroadphase(const BroadphaseSettings& s) : settings_(s) {}
+
+  BroadphaseType type() const override { return BroadphaseType::kAabbTree; }
+
+  void query_aabb(const Aabb& box, AabbQueryCallback callback) const override {
+    detail::require_valid_box("box", box);
+    query_fat(box, [&](std::int32_t node) {
+      const ProxyId id = nodes_[static_cast<std::size_t>(node)].proxy();
+      if (tight(id).overlaps(box)) return callback(id);
+      return true;
+    });
+  }
+
+  void raycast(const Vec3& origin, const Vec3& dir, Real max_t,
+               RayQueryCallback callback) const override {
+    detail::require_valid_ray(origin, dir, max_t);
+    if (root_ == kNull) return;
+    const detail::PreparedRay ray(origin, dir);
+    TraversalStack stack;
+    stack.push(root_);
+    while (!stack.empty()) {
+      const Node& n = nodes_[static_cast<std::size_t>(stack.pop())];
+      Real t;
+      // max_t shrinks as the callback clips, pruning farther subtrees.
+      if (!ray.hits(n.box, max_t, t)) continue;
+      if (n.is_leaf()) {
+        if (!ray.hits(tight(n.proxy()), max_t, t)) continue;
+        const Real next = callback(n.proxy(), t);
+        if (!(next >= 0)) return;  // negative (or NaN) stops the cast
+        max_t = next < max_t ? next : max_t;
+      } else {
+        stack.push(n.child1);
+        stack.push(n.child2);
+      }
+    }
+  }
+
+  BroadphaseStats stats() const override {
+    BroadphaseStats s = Broadphase::stats();
+    s.node_count = static_cast<int>(nodes_.size()) - free_count_;
+    s.height = root_ == kNull ? 0 : nodes_[static_cast<std::size_t>(root_)].height;
+    s.candidate_pairs = static_cast<int>(candidates_.size());
+    s.reinsertions = reinsertions_;
+    return s;
+  }
+
+  void validate() const override {
+    Broadphase::validate();
+    auto fail = [](const char* what) { throw std::logic_error(std::string("aabb tree: ") + what); };
+    // Free list.
+    int free_seen = 0;
+    for (std::int32_t f = free_list_; f != kNull; f = nodes_[static_cast<std::size_t>(f)].parent) {
+      if (nodes_[static_cast<std::size_t>(f)].height != -1) fail("free node with a height");
+      if (++free_seen > static_cast<int>(nodes_.size())) fail("free list has a cycle");
+    }
+    if (free_seen != free_count_) fail("free count mismatch");
+    // Structure, heights, boxes, by a traversal from the root.
+    int leaves = 0, reached = 0;
+    if (root_ != kNull) {
+      if (nodes_[static_cast<std::size_t>(root_)].parent != kNull) fail("root has a parent");
+      TraversalStack stack;
+      stack.push(root_);
+      while (!stack.empty()) {
+        const std::int32_t i = stack.pop();
+        const Node& n = nodes_[static_cast<std::size_t>(i)];
+        if (++reached > static_cast<int>(nodes_.size())) fail("cycle");
+        if (n.is_leaf()) {
+          ++leaves;
+          if (n.height != 0) fail("leaf height != 0");
+          if (!is_live(n.proxy())) fail("leaf of a dead proxy");
+          if (leaf_[static_cast<std::size_t>(n.proxy())] != i) fail("proxy -> leaf link broken");
+          if (!n.box.contains(tight(n.proxy()))) fail("fat box does not contain the tight box");
+          continue;
+        }
+        const Node& c1 = nodes_[static_cast<std::size_t>(n.child1)];
+        const Node& c2 = nodes_[static_cast<std::size_t>(n.child2)];
+        if (c1.parent != i || c2.parent != i) fail("child -> parent link broken");
+        if (n.height != 1 + std::max(c1.height, c2.height)) fail("wrong height");
+        const Aabb u = Aabb::merge(c1.box, c2.box);
+        if (u.min != n.box.min || u.max != n.box.max) fail("box is not the union of its children");
+        stack.push(n.child1);
+        stack.push(n.child2);
+      }
+    }
+    if (leaves != proxy_count()) fail("leaf count differs from the live proxy count");
+    if (reached + free_count_ != static_cast<int>(nodes_.size())) fail("unreachable nodes");
+    // Candidate pairs: sorted, unique, exactly the fat-overlapping pairs.
+    for (std::size_t k = 0; k < candidates_.size(); ++k) {
+      const ProxyPair& p = candidates_[k];
+      if (!(p.first < p.second)) fail("candidate pair not ordered");
+      if (k > 0 && !(candidates_[k - 1] < p)) fail("candidates not sorted and unique");
+      if (!is_live(p.first) || !is_live(p.second)) fail("candidate of a dead proxy");
+      if (!fat(p.first).overlaps(fat(p.second))) fail("candidate whose fat boxes do not overlap");
+    }
+    std::size_t expected = 0;
+    for (ProxyId id = 0; id < id_capacity(); ++id) {
+      if (!is_live(id)) continue;
+      query_fat(fat(id), [&](std::int32_t node) {
+        const ProxyId o = nodes_[static_cast<std::size_t>(node)].proxy();
+        if (o > id) {
+          ++expected;
+          if (!std::binary_search(candidates_.begin(), candidates_.end(), ProxyPair(id, o)))
+            fail("missing candidate pair");
+        }
+        return true;
+      });
+    }
+    if (expected != candidates_.size()) fail("candidate count mismatch");
+  }
+
+ protected:
+  void on_create(ProxyId id) override {
+    const auto i = static_cast<std::size_t>(id);
+    if (i >= leaf_.size()) {
+      leaf_.resize(i + 1, kNull);
+      changed_.resize(i + 1, 0);
+    }
+    const std::int32_t leaf = allocate_node();
+    Node& n = nodes_[static_cast<std::size_t>(leaf)];
+    n.box = fat_box(tight(id), Vec3::Zero());
+    n.child2 = id;
+    n.height = 0;
+    leaf_[i] = leaf;
+    insert_leaf(leaf);
+    mark_changed(id);
+  }
+
+  void on_destroy(ProxyId id) override {
+    const auto i = static_cast<std::size_t>(id);
+    const std::int32_t leaf = leaf_[i];
+    remove_leaf(leaf);
+    free_node(leaf);
+    leaf_[i] = kNull;
+    mark_changed(id);
+  }
+
+  void on_move(ProxyId id, const Vec3& displacement) override {
+    const std::int32_t leaf = leaf_[static_cast<std::size_t>(id)];
+    const Aabb& t = tight(id);
+    const Aabb& old_fat = nodes_[static_cast<std::size_t>(leaf)].box;
+    const Aabb new_fat = fat_box(t, displacement);
+    if (old_fat.contains(t) && new_fat.fattened(kShrinkMargins * settings_.aabb_margin).contains(old_fat))
+      return;  // the fat box still does its job: no tree change, no pair change
+    remove_leaf(leaf);
+    nodes_[static_cast<std::size_t>(leaf)].box = new_fat;
+    insert_leaf(leaf);
+    ++reinsertions_;
+    mark_changed(id);
+  }
+
+  void on_update() override {
+    if (changed_list_.empty()) return;  // only moves inside fat boxes: candidates still exact
+    // 1. Drop the candidates of every proxy whose fat box changed (moved, created,
+    //    destroyed); all other candidates are still exact.
+    std::size_t w = 0;
+    for (const ProxyPair& p : candidates_) {
+      if (!changed_[static_cast<std::size_t>(p.first)] && !changed_[static_cast<std::size_t>(p.second)])
+        candidates_[w++] = p;
+    }
+    candidates_.resize(w);
+    // 2. Re-query the changed proxies that are live. A pair of two changed proxies is
+    //    found from both sides; it is kept from the smaller id's side only.
+    fresh_.clear();
+    for (const ProxyId id : changed_list_) {
+      if (!is_live(id)) continue;
+      query_fat(fat(id), [&](std::int32_t node) {
+        const ProxyId o = nodes_[static_cast<std::size_t>(node)].proxy();
+        if (o != id && (!changed_[static_cast<std::size_t>(o)] || o > id))
+          fresh_.emplace_back(std::min(id, o), std::max(id, o));
+        return true;
+      });
+    }
+    for (const ProxyId id : changed_list_) changed_[static_cast<std::size_t>(id)] = 0;
+    changed_list_.clear();
+    // 3. Merge the new pairs into the sorted list (disjoint sets: every fresh pair has a
+    //    changed member, no kept one does). The buffers keep their capacity.
+    std::sort(fresh_.begin(), fresh_.end());
+    merged_.clear();
+    std::merge(candidates_.begin(), candidates_.end(), fresh_.begin(), fresh_.end(),
+               std::back_inserter(merged_));
+    candidates_.swap(merged_);
+  }
+
+  void on_query_pairs(std::vector<ProxyPair>& out) override {
+    for (const ProxyPair& p : candidates_)
+      if (tight(p.first).overlaps(tight(p.second))) out.push_back(p);
+  }
+
+ private:
+  /// One cache line per node (64 bytes): a leaf keeps its proxy id in child2, which a
+  /// leaf does not otherwise use, so queries touch one line per visited node.
+  struct alignas(64) Node {
+    Aabb box;                     // fat box of a leaf, union of the children otherwise
+    std::int32_t parent = kNull;  // next free node while on the free list
+    std::int32_t child1 = kNull;  // kNull for a leaf
+    std::int32_t child2 = kNull;  // a leaf's proxy id
+    std::int32_t height = -1;     // 0 for a leaf, -1 when free
+    bool is_leaf() const { return child1 == kNull; }
+    ProxyId proxy() const { return child2; }
+  };
+  static_assert(sizeof(Node) == 64, "tree node should fill exactly one cache line");
+
+  const Aabb& fat(ProxyId id) const {
+    return nodes_[static_cast<std::size_t>(leaf_[static_cast<std::size_t>(id)])].box;
+  }
+
+  Aabb fat_box(const Aabb& t, const Vec3& displacement) const {
+    Aabb f = t.fattened(settings_.aabb_margin);
+    const Vec3 d = settings_.displacement_multiplier * displacement;
+    for (int k = 0; k < 3; ++k) {
+      if (d[k] < 0) f.min[k] += d[k];
+      else f.max[k] += d[k];
+    }
+    return f;
+  }
+
+  void mark_changed(ProxyId id) {
+    auto& c = changed_[static_cast<std::size_t>(id)];
+    if (!c) {
+      c = 1;
+      changed_list_.push_back(id);
+    }
+  }
+
+  Node& node(std::int32_t i) { return nodes_[static_cast<std::size_t>(i)]; }
+
+  std::int32_t allocate_node() {
+    if (free_list_ == kNull) {
+      nodes_.emplace_back();
+      return static_cast<std::int32_t>(nodes_.size() - 1);
+    }
+    const std::int32_t i = free_list_;
+    free_list_ = node(i).parent;
+    --free_count_;
+    node(i) = Node{};
+    return i;
+  }
+
+  void free_node(std::int32_t i) {
+    Node& n = node(i);
+    n = Node{};
+    n.parent = free_list_;
+    free_list_ = i;
+    ++free_count_;
+  }
+
+  /// Visits every leaf whose fat box overlaps `box`; stops when f returns false.
+  template <class F>
+  void query_fat(const Aabb& box, F&& f) const {
+    if (root_ == kNull) return;
+    TraversalStack stack;
+    stack.push(root_);
+    while (!stack.empty()) {
+      const Node& n = nodes_[static_cast<std::size_t>(stack.pop())];
+      if (!n.box.overlaps(box)) continue;
+      if (n.is_leaf()) {
+        if (!f(static_cast<std::int32_t>(&n - nodes_.data()))) return;
+      } else {
+        stack.push(n.child1);
+        stack.push(n.child2);
+      }
+    }
+  }
+
+  /// Branch and bound for the sibling minimising the SAH cost increase (Bittner et al.
+  /// 2012, 3.1). Making node S the sibling of leaf L costs the area of the new parent,
+  /// SA(S u L), plus the growth of every ancestor A of S, SA(A u L) - SA(A) (the
+  /// "inherited" cost). Descending below S adds at least SA(L) to S's inherited cost,
+  /// so a subtree is skipped once SA(L) + inherited >= best cost. Nodes are expanded in
+  /// order of inherited cost (a min-heap), so the first node whose bound fails ends
+  /// the search.
+  std::int32_t find_best_sibling(const Aabb& leaf_box) {
+    const Real leaf_area = leaf_box.surface_area();
+    std::int32_t best = root_;
+    Real best_cost = kInf;
+    heap_.clear();
+    heap_.push_back({0.0, root_});
+    // Min-heap on (inherited cost, node index): the index breaks ties deterministically.
+    auto greater = [](const HeapItem& a, const HeapItem& b) {
+      return a.inherited > b.inherited || (a.inherited == b.inherited && a.node > b.node);
+    };
+    while (!heap_.empty()) {
+      std::pop_heap(heap_.begin(), heap_.end(), greater);
+      const HeapItem item = heap_.back();
+      heap_.pop_back();
+      if (leaf_area + item.inherited >= best_cost) break;  // nothing left can do better
+      const Node& n = node(item.node);
+      const Real direct = Aabb::merge(n.box, leaf_box).surface_area();
+      const Real cost = direct + item.inherited;
+      if (cost < best_cost) {
+        best_cost = cost;
+        best = item.node;
+      }
+      if (n.is_leaf()) continue;
+      const Real child_inherited = cost - n.box.surface_area();
+      if (leaf_area + child_inherited < best_cost) {
+        heap_.push_back({child_inherited, n.child1});
+        std::push_heap(heap_.begin(), heap_.end(), greater);
+        heap_.push_back({child_inherited, n.child2});
+        std::push_heap(heap_.begin(), heap_.end(), greater);
+      }
+    }
+    return best;
+  }
+
+  void insert_leaf(std::int32_t leaf) {
+    if (root_ == kNull) {
+      root_ = leaf;
+      node(leaf).parent = kNull;
+      return;
+    }
+    const Aabb leaf_box = node(leaf).box;
+    const std::int32_t sibling = find_best_sibling(leaf_box);
+    const std::int32_t old_parent = node(sibling).parent;
+    const std::int32_t parent = allocate_node();  // may reallocate nodes_: no references held
+    Node& p = node(parent);
+    p.parent = old_parent;
+    p.child1 = sibling;
+    p.child2 = leaf;
+    p.box = Aabb::merge(node(sibling).box, leaf_box);
+    p.height = node(sibling).height + 1;
+    if (old_parent == kNull) {
+      root_ = parent;
+    } else {
+      Node& op = node(old_parent);
+      (op.child1 == sibling ? op.child1 : op.child2) = parent;
+    }
+    node(sibling).parent = parent;
+    node(leaf).parent = parent;
+    refit_to_root(parent);
+  }
+
+  void remove_leaf(std::int32_t leaf) {
+    if (leaf == root_) {
+      root_ = kNull;
+      return;
+    }
+    const std::int32_t parent = node(leaf).parent;
+    const std::int32_t grand = node(parent).parent;
+    const std::int32_t sibling = node(parent).child1 == leaf ? node(parent).child2 : node(parent).child1;
+    node(sibling).parent = grand;
+    if (grand == kNull) {
+      root_ = sibling;
+    } else {
+      Node& g = node(grand);
+      (g.child1 == parent ? g.child1 : g.child2) = sibling;
+    }
+    free_node(parent);
+    node(leaf).parent = kNull;
+    if (grand != kNull) refit_to_root(grand);
+  }
+
+  /// Rebalances, then recomputes height and box, of every node from `i` to the root.
+  void refit_to_root(std::int32_t i) {
+    while (i != kNull) {
+      i = balance(i);
+      Node& n = node(i);
+      const Node& c1 = node(n.child1);
+      const Node& c2 = node(n.child2);
+      n.height = 1 + std::max(c1.height, c2.height);
+      n.box = Aabb::merge(c1.box, c2.box);
+      i = n.parent;
+    }
+  }
+
+  /// If the children of internal node `a` differ in height by more than one, lifts the
+  /// taller child into a's place (a single AVL rotation): the taller child c keeps its
+  /// taller child and takes `a` as its other child; `a` takes c's shorter child. Returns
+  /// the node now at a's place. Heights and boxes of `a` and `c` are recomputed here;
+  /// the caller refits the new subtree root.
+  std::int32_t balance(std::int32_t a) {
+    Node& na = node(a);
+    if (na.is_leaf() || na.height < 2) return a;
+    const std::int32_t b = na.child1, c = na.child2;
+    const int imbalance = node(c).height - node(b).height;
+    if (imbalance > 1) return rotate_up(a, c, /*a_slot_of_child=*/2);
+    if (imbalance < -1) return rotate_up(a, b, /*a_slot_of_child=*/1);
+    return a;
+  }
+
+  // Lifts child `c` (in a's child slot `slot`) above `a`.
+  std::int32_t rotate_up(std::int32_t a, std::int32_t c, int slot) {
+    Node& na = node(a);
+    Node& nc = node(c);
+    const std::int32_t f = nc.child1, g = nc.child2;
+    const std::int32_t up = a;  // stays a child of c
+    // c takes a's place under a's parent.
+    nc.parent = na.parent;
+    if (na.parent == kNull) {
+      root_ = c;
+    } else {
+      Node& pp = node(na.parent);
+      (pp.child1 == a ? pp.child1 : pp.child2) = c;
+    }
+    na.parent = c;
+    // c keeps its taller child; the shorter one replaces c under a.
+    const bool f_taller = node(f).height > node(g).height;
+    const std::int32_t keep = f_taller ? f : g;
+    const std::int32_t give = f_taller ? g : f;
+    nc.child1 = up;
+    nc.child2 = keep;
+    (slot == 2 ? na.child2 : na.child1) = give;
+    node(give).parent = a;
+    const Node& a1 = node(na.child1);
+    const Node& a2 = node(na.child2);
+    na.height = 1 + std::max(a1.height, a2.height);
+    na.box = Aabb::merge(a1.box, a2.box);
+    nc.height = 1 + std::max(na.height, node(keep).height);
+    nc.box = Aabb::merge(na.box, node(keep).box);
+    return c;
+  }
+
+  struct HeapItem {
+    Real inherited;
+    std::int32_t node;
+  };
+
+  BroadphaseSettings settings_;
+  std::vector<Node> nodes_;
+  std::int32_t root_ = kNull;
+  std::int32_t free_list_ = kNull;
+  int free_count_ = 0;
+  std::vector<std::int32_t> leaf_;       // by proxy id: its leaf node
+  std::vector<std::uint8_t> changed_;    // by proxy id: fat box changed since update()
+  std::vector<ProxyId> changed_list_;    // the ids with changed_ set
+  std::vector<ProxyPair> candidates_;    // sorted: pairs whose fat boxes overlap
+  std::vector<ProxyPair> fresh_;         // scratch for on_update
+  std::vector<ProxyPair> merged_;        // scratch for on_update
+  std::vector<HeapItem> heap_;           // scratch for find_best_sibling
+  std::int64_t reinsertions_ = 0;
+};
+
+}  // namespace
+
+namespace detail {
+std::unique_ptr<Broadphase> make_aabb_tree_broadphase(const BroadphaseSettings& settings) {
+  return std::make_unique<AabbTreeBroadphase>(settings);
+}
+}  // namespace detail
+
+}  // namespace wmo
