@@ -19,7 +19,9 @@ struct CollideSettings {
   /// and overlapping pairs only.
   Real margin = 0;
   /// Use the fast special routines where they exist. False forces the generic
-  /// GJK/EPA + clipping path (used by tests and benchmarks to compare the two).
+  /// GJK/EPA + clipping path (used by tests and benchmarks to compare the two) for
+  /// every convex pair, sphere-sphere and box-box included. Plane-convex pairs always
+  /// use collide_plane_convex: a plane has no support point, so GJK cannot take it.
   bool use_special_routines = true;
   GjkSettings gjk{};
   EpaSettings epa{};
@@ -35,8 +37,15 @@ QueryStatus collide(const Shape& a, const Pose& pose_a, const Shape& b, const Po
 /// True if collide() has a routine (special or generic) for this pair of types.
 bool collide_supported(ShapeType a, ShapeType b);
 
-// ---- Special routines, in A's frame. Each returns true and fills `m` if the pair is
-// within `margin`; false (m untouched) otherwise. ----
+// ---- Special routines, in A's frame. Each returns true and fills `m` (normal, count,
+// points; child_a / child_b are left as they are) if the pair is within `margin`;
+// false (m untouched) otherwise. The sphere / capsule / box and plane routines neither
+// allocate nor make virtual calls (a hull is reached through the final class, so its
+// calls are devirtualised). Feature ids of the round-shape routines are
+// (feature of A << 8) | feature of B, with sphere 0, capsule 0 / 1 for the ends at
+// y = -h / +h and 2 for its side, and for a box the Voronoi region code
+// sum_i t_i 3^i (t_i = 0 inside the slab of axis i, 1 at +h_i, 2 at -h_i);
+// collide_plane.cpp documents the plane-convex ids. ----
 bool collide_sphere_sphere(const Sphere& a, const Sphere& b, const Pose& b_in_a, Real margin, Manifold& m);
 bool collide_sphere_box(const Sphere& a, const Box& b, const Pose& b_in_a, Real margin, Manifold& m);
 bool collide_sphere_capsule(const Sphere& a, const Capsule& b, const Pose& b_in_a, Real margin, Manifold& m);

@@ -1,1 +1,0 @@
-#include "wmo/collision/narrowphase.h"
