@@ -1,4 +1,53 @@
-"""WMO: a 3D rigid-body collision and physics engine."""
+"""WMO: a 3D rigid-body collision and physics engine.
+
+Conventions (stated once in ``cpp/include/wmo/types.h``): metres, kilograms, seconds,
+radians; a pose is a position ``(3,)`` and a unit quaternion ``(4,)`` in ``(x, y, z, w)``
+order (as SciPy and PyBullet); contact normals point from A to B; depth is positive when
+shapes overlap. Capsules and cylinders are aligned with their local Y axis.
+
+Errors: a bad value (NaN, negative size, non-unit quaternion) raises ``ValueError``
+(``wmo.InvalidArgument``), naming the field and the value; an argument of the wrong type
+or array shape raises ``TypeError`` naming the expected shape.
+
+>>> import wmo
+>>> box, ball = wmo.Box(half_extents=(1, 1, 1)), wmo.Sphere(radius=0.5)
+>>> d = wmo.geometry.distance(box, wmo.Pose(), ball, wmo.Pose(position=(3, 0, 0)))
+>>> round(d.distance, 9)
+1.5
+"""
 from . import _core
+from ._core import (
+    Box,
+    Capsule,
+    Compound,
+    ConvexHull,
+    ConvexShape,
+    Cylinder,
+    InvalidArgument,
+    MassProperties,
+    Plane,
+    Pose,
+    Shape,
+    Sphere,
+    TriangleMesh,
+)
+from . import geometry
 
 __version__ = "0.1.0"
+
+__all__ = [
+    "Box",
+    "Capsule",
+    "Compound",
+    "ConvexHull",
+    "ConvexShape",
+    "Cylinder",
+    "InvalidArgument",
+    "MassProperties",
+    "Plane",
+    "Pose",
+    "Shape",
+    "Sphere",
+    "TriangleMesh",
+    "geometry",
+]
