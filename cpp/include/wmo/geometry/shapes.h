@@ -200,6 +200,11 @@ class ConvexHull final : public ConvexShape {
 
   const std::vector<Vec3>& vertices() const { return vertices_; }
   const std::vector<Face>& faces() const { return faces_; }
+  /// Distance tolerance the hull was built with (unit: m): input points within it of
+  /// the hull were treated as on it and dropped, face vertices lie within 2x it of their
+  /// face plane. 6 * DBL_EPSILON * (max|x| + max|y| + max|z|) of the input, raised by
+  /// 1e3 or 1e6 only for clouds that are degenerate within round-off.
+  Real tolerance() const { return tolerance_; }
   const std::vector<HalfEdge>& half_edges() const { return half_edges_; }
   /// One half-edge index per undirected edge (the one with the smaller index of each twin pair).
   const std::vector<int>& edges() const { return edges_; }
@@ -221,12 +226,15 @@ class ConvexHull final : public ConvexShape {
   std::vector<int> edges_;
   std::vector<std::vector<int>> vertex_neighbors_;  // for hill-climbing support on large hulls
   Aabb aabb_;
+  Real tolerance_ = 0;
 };
 
 /// Half-space { x : dot(normal, x) <= offset } (local frame). Not solid, static only.
 class Plane final : public Shape {
  public:
-  /// `normal` is normalised; throws InvalidArgument if it is zero or not finite.
+  /// `normal` is normalised; `offset` (metres) is kept as given, so it is the distance
+  /// along the unit normal. Throws InvalidArgument if the normal is zero or not finite,
+  /// or the offset is not finite.
   Plane(const Vec3& normal, Real offset);
   const Vec3& normal() const { return normal_; }
   Real offset() const { return offset_; }
@@ -246,8 +254,23 @@ class TriangleMeshBvh;  // defined in wmo/geometry/mesh_bvh.h
 /// it can be suppressed or corrected (internal-edge handling).
 class TriangleMesh final : public Shape {
  public:
-  /// Throws InvalidArgument for non-finite vertices, out-of-range indices, or an empty
-  /// mesh. Degenerate (zero-area) triangles are rejected with their index.
+  /// Throws InvalidArgument for non-finite vertices ("vertices[i] must be finite, got
+  /// (x, y, z)"), out-of-range indices ("triangles[t] ..." with the index), or an empty
+  /// mesh. Degenerate triangles are rejected with their index: a triangle whose
+  /// |(v1-v0)x(v2-v0)| is at most 1e-12 * (its longest edge)^2, i.e. whose height is
+  /// below 1e-12 of its longest edge (repeated indices included), has no usable normal.
+  ///
+  /// Adjacency is by vertex index (weld duplicate vertices first). An edge shared by
+  /// exactly two triangles that traverse it in opposite directions (consistent winding)
+  /// links them as neighbours; an edge used once, by three or more triangles
+  /// (non-manifold) or by two triangles with inconsistent winding is a boundary edge.
+  ///
+  /// Edge classification: with n the triangle's normal, v the edge's first vertex and
+  /// p the neighbour's vertex opposite the edge, h = n.(p - v). The edge is convex
+  /// (seen from the front) if h < -tol, concave (convex seen from the back) if h > tol,
+  /// and flat otherwise, with tol = kFlatEdgeRelTolerance * (diagonal of the mesh's
+  /// bounding box). Boundary edges count as convex from both sides: they are real
+  /// features.
   TriangleMesh(std::vector<Vec3> vertices, std::vector<std::array<int, 3>> triangles);
   ~TriangleMesh() override;
 
@@ -261,6 +284,18 @@ class TriangleMesh final : public Shape {
   /// True if edge e of triangle t is convex (a real feature that may produce contacts);
   /// false if it is flat or concave, i.e. internal to the surface.
   bool edge_is_convex(int t, int e) const { return (convex_edge_bits_[t] >> e) & 1u; }
+  /// The same seen from the back of the triangle (against the normal): true for a
+  /// concave edge or a boundary edge, false for a flat or convex one.
+  bool edge_is_convex_from_back(int t, int e) const {
+    return (convex_edge_bits_[t] >> (e + 3)) & 1u;
+  }
+  /// Tolerance of the flat-edge test (see the constructor), relative to the diagonal of
+  /// the mesh's bounding box: 1e-9 lies ~4.5e6 ulp above the round-off of h (a few
+  /// DBL_EPSILON times the diagonal), while an edge flagged flat bends the surface by
+  /// less than 1e-9 of the mesh size, far below anything a contact can resolve.
+  static constexpr Real kFlatEdgeRelTolerance = 1e-9;
+  /// The absolute flat-edge tolerance used for this mesh (unit: m).
+  Real flat_edge_tolerance() const { return flat_tolerance_; }
   const TriangleMeshBvh& bvh() const { return *bvh_; }
 
   Aabb local_aabb() const override { return aabb_; }
@@ -274,6 +309,7 @@ class TriangleMesh final : public Shape {
   std::vector<std::uint8_t> convex_edge_bits_;
   std::unique_ptr<TriangleMeshBvh> bvh_;
   Aabb aabb_;
+  Real flat_tolerance_ = 0;
 };
 
 /// A rigid set of convex children, each with a pose in the compound's frame.
