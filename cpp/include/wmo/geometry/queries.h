@@ -1,6 +1,6 @@
 // WMO geometry layer: distance, closest points, penetration and ray casts on any
 // pair of shapes, with world poses and world-space results (see types.h for the
-// convention). Convex pairs go through GJK / EPA (gjk.h, epa.h) on the shapes' cores
+// convention). Convex pairs go through GJK / EPA (gjk.h) on the shapes' cores
 // plus radii; pairs involving a plane, triangle mesh or compound are reduced to convex
 // pairs. A pair with no routine returns QueryStatus::kUnsupported.
 #pragma once

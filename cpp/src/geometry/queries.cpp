@@ -1,0 +1,283 @@
+// Top-level geometry queries (queries.h): world poses in, world results out.
+//
+// Every pair is reduced to a routine in the frame of one of its shapes (types.h: small
+// coordinates, so shapes 10 km from the origin keep their precision), whose result is
+// then mapped to world space:
+//   * convex-convex: convex_queries.h (GJK / EPA on cores plus radii);
+//   * plane-convex: analytic, the support of the convex shape along -normal;
+//   * compound-anything: the children, each as its own pair, keeping the smallest
+//     (signed) distance; children whose bounding-box gap already exceeds the best
+//     answer are skipped;
+//   * triangle mesh-convex: the mesh's BVH gives the triangles near the convex shape,
+//     each triangle is a 3-point convex support (two-sided);
+//   * anything else (plane-plane, mesh-mesh, mesh-plane): QueryStatus::kUnsupported.
+// A pair given in the other order is computed in the supported order and mirrored
+// (points swapped, normal negated).
+#include "wmo/geometry/queries.h"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include "wmo/geometry/convex_queries.h"
+#include "wmo/geometry/gjk.h"
+#include "wmo/geometry/mesh_bvh.h"
+
+
+namespace wmo {
+
+namespace {
+
+enum class Mode { kDistance, kSigned };
+
+void check_pose(const char* field, const Pose& p) {
+  if (!p.position.allFinite() || !p.rotation.coeffs().allFinite())
+    throw InvalidArgument(std::string(field) + " must be finite, got position " +
+                          to_string(p.position));
+}
+
+DistanceResult to_world(DistanceResult r, const Pose& frame) {
+  r.point_a = frame.transform_point(r.point_a);
+  r.point_b = frame.transform_point(r.point_b);
+  r.normal = frame.transform_vector(r.normal);
+  return r;
+}
+
+// The same result with A and B exchanged.
+DistanceResult mirrored(DistanceResult r) {
+  std::swap(r.point_a, r.point_b);
+  r.normal = -r.normal;
+  return r;
+}
+
+DistanceResult unsupported() {
+  DistanceResult r;
+  r.status = QueryStatus::kUnsupported;
+  // Nothing was computed: an infinite distance cannot be mistaken for a contact.
+  r.distance = kInf;
+  return r;
+}
+
+// Euclidean gap between two boxes: a lower bound on the distance of what they bound.
+Real aabb_gap(const Aabb& a, const Aabb& b) {
+  const Vec3 g = (b.min - a.max).cwiseMax(a.min - b.max).cwiseMax(Vec3::Zero());
+  return g.norm();
+}
+
+DistanceResult pair_query(Mode mode, const Shape& a, const Pose& pa, const Shape& b, const Pose& pb,
+                          const GjkSettings& gjk, const EpaSettings& epa);
+
+// Compound C (as A) against any shape O (as B), world frame.
+DistanceResult compound_query(Mode mode, const Compound& c, const Pose& pc, const Shape& o,
+                              const Pose& po, const GjkSettings& gjk, const EpaSettings& epa) {
+  DistanceResult best = unsupported();
+  bool any = false;
+  const Aabb o_box = o.world_aabb(po);
+  for (const Compound::Child& child : c.children()) {
+    const Pose child_pose = pc * child.pose;
+    if (any && aabb_gap(child.shape->world_aabb(child_pose), o_box) >= best.distance) continue;
+    const DistanceResult r = pair_query(mode, *child.shape, child_pose, o, po, gjk, epa);
+    if (r.status == QueryStatus::kUnsupported) return r;  // same for every child type
+    if (!any || r.distance < best.distance) best = r;
+    any = true;
+    if (mode == Mode::kDistance && best.intersecting) break;  // 0 cannot be beaten
+  }
+  return best;
+}
+
+// Triangle mesh M (as A) against convex B at b_in_m, in the mesh frame.
+DistanceResult mesh_convex(Mode mode, const TriangleMesh& m, const ConvexShape& b, const Pose& b_in_m,
+                           const GjkSettings& gjk, const EpaSettings& epa) {
+  DistanceResult best;
+  auto visit = [&](int t) {
+    const auto& tri = m.triangles()[t];
+    const auto& v = m.vertices();
+    const DistanceResult r =
+        triangle_convex(v[tri[0]], v[tri[1]], v[tri[2]], b, b_in_m, mode == Mode::kSigned, gjk, epa);
+    if (r.distance < best.distance) best = r;
+    return !(mode == Mode::kDistance && best.intersecting);  // 0 cannot be beaten: stop
+  };
+  // A triangle at distance s from B meets B's box grown by s. So once the best distance
+  // found within a margin is <= the margin, no triangle outside the grown box can beat
+  // it. Otherwise the margin doubles; it ends at the latest when the grown box holds
+  // the whole mesh (every triangle visited). The pass cap only guards against a
+  // non-finite box; 200 doublings exceed any finite extent.
+  const Aabb b_box = b.world_aabb(b_in_m);
+  const Aabb m_box = m.local_aabb();
+  const Vec3 size = b_box.max - b_box.min;
+  Real margin = aabb_gap(b_box, m_box) + std::max(Real(0.5) * size.maxCoeff(), Real(1e-9));
+  for (int pass = 0; pass < 200; ++pass) {
+    const Aabb query = b_box.fattened(margin);
+    best = unsupported();
+    best.status = QueryStatus::kOk;
+    m.bvh().query_aabb(query, visit);
+    if (best.distance <= margin || query.contains(m_box)) break;
+    margin *= 2;
+  }
+  return best;
+}
+
+DistanceResult pair_query(Mode mode, const Shape& a, const Pose& pa, const Shape& b, const Pose& pb,
+                          const GjkSettings& gjk, const EpaSettings& epa) {
+  const ShapeType ta = a.type(), tb = b.type();
+  if (ta == ShapeType::kCompound)
+    return compound_query(mode, static_cast<const Compound&>(a), pa, b, pb, gjk, epa);
+  if (tb == ShapeType::kCompound)
+    return mirrored(compound_query(mode, static_cast<const Compound&>(b), pb, a, pa, gjk, epa));
+  const bool ca = a.is_convex(), cb = b.is_convex();
+  if (ca && cb) {
+    const auto& sa = static_cast<const ConvexShape&>(a);
+    const auto& sb = static_cast<const ConvexShape&>(b);
+    const Pose b_in_a = pa.relative(pb);
+    return to_world(mode == Mode::kDistance ? distance_convex_convex(sa, sb, b_in_a, gjk)
+                                            : penetration_convex_convex(sa, sb, b_in_a, gjk, epa),
+                    pa);
+  }
+  if (ta == ShapeType::kPlane && cb)
+    return to_world(plane_convex(static_cast<const Plane&>(a), static_cast<const ConvexShape&>(b),
+                                 pa.relative(pb), mode == Mode::kSigned),
+                    pa);
+  if (ca && tb == ShapeType::kPlane)
+    return mirrored(to_world(plane_convex(static_cast<const Plane&>(b),
+                                          static_cast<const ConvexShape&>(a), pb.relative(pa),
+                                          mode == Mode::kSigned),
+                             pb));
+  if (ta == ShapeType::kTriangleMesh && cb)
+    return to_world(mesh_convex(mode, static_cast<const TriangleMesh&>(a),
+                                static_cast<const ConvexShape&>(b), pa.relative(pb), gjk, epa),
+                    pa);
+  if (ca && tb == ShapeType::kTriangleMesh)
+    return mirrored(to_world(mesh_convex(mode, static_cast<const TriangleMesh&>(b),
+                                         static_cast<const ConvexShape&>(a), pb.relative(pa), gjk,
+                                         epa),
+                             pb));
+  return unsupported();
+}
+
+// Boolean version; returns false with *supported = false for unsupported pairs.
+bool intersect_query(const Shape& a, const Pose& pa, const Shape& b, const Pose& pb,
+                     const GjkSettings& gjk, bool* supported) {
+  const ShapeType ta = a.type(), tb = b.type();
+  if (ta == ShapeType::kCompound || tb == ShapeType::kCompound) {
+    const bool a_is_c = ta == ShapeType::kCompound;
+    const auto& c = static_cast<const Compound&>(a_is_c ? a : b);
+    const Pose& pc = a_is_c ? pa : pb;
+    const Shape& o = a_is_c ? b : a;
+    const Pose& po = a_is_c ? pb : pa;
+    const Aabb o_box = o.world_aabb(po);
+    for (const Compound::Child& child : c.children()) {
+      const Pose child_pose = pc * child.pose;
+      if (!child.shape->world_aabb(child_pose).overlaps(o_box)) continue;
+      if (intersect_query(*child.shape, child_pose, o, po, gjk, supported)) return true;
+      if (!*supported) return false;
+    }
+    return false;
+  }
+  const bool ca = a.is_convex(), cb = b.is_convex();
+  if (ca && cb)
+    return intersect_convex_convex(static_cast<const ConvexShape&>(a),
+                                   static_cast<const ConvexShape&>(b), pa.relative(pb), gjk);
+  if ((ta == ShapeType::kPlane && cb) || (ca && tb == ShapeType::kPlane)) {
+    const bool a_is_p = ta == ShapeType::kPlane;
+    return plane_convex(static_cast<const Plane&>(a_is_p ? a : b),
+                        static_cast<const ConvexShape&>(a_is_p ? b : a),
+                        a_is_p ? pa.relative(pb) : pb.relative(pa), false)
+        .intersecting;
+  }
+  if ((ta == ShapeType::kTriangleMesh && cb) || (ca && tb == ShapeType::kTriangleMesh)) {
+    const bool a_is_m = ta == ShapeType::kTriangleMesh;
+    const auto& m = static_cast<const TriangleMesh&>(a_is_m ? a : b);
+    const auto& s = static_cast<const ConvexShape&>(a_is_m ? b : a);
+    const Pose s_in_m = a_is_m ? pa.relative(pb) : pb.relative(pa);
+    bool found = false;
+    m.bvh().query_aabb(s.world_aabb(s_in_m), [&](int t) {
+      const auto& tri = m.triangles()[t];
+      const auto& v = m.vertices();
+      found = intersect_triangle_convex(v[tri[0]], v[tri[1]], v[tri[2]], s, s_in_m, gjk);
+      return !found;  // stop at the first touching triangle
+    });
+    return found;
+  }
+  *supported = false;
+  return false;
+}
+
+
+// Ray in `shape`'s local frame.
+RayHit raycast_local(const Shape& shape, const Vec3& o, const Vec3& d, Real max_t) {
+  switch (shape.type()) {
+    case ShapeType::kPlane:
+      return raycast_plane(static_cast<const Plane&>(shape), o, d, max_t);
+    case ShapeType::kTriangleMesh:
+      return raycast_mesh(static_cast<const TriangleMesh&>(shape), o, d, max_t);
+    case ShapeType::kCompound: {
+      const auto& c = static_cast<const Compound&>(shape);
+      RayHit best;
+      for (int i = 0; i < static_cast<int>(c.children().size()); ++i) {
+        const Compound::Child& child = c.children()[i];
+        const Vec3 lo = child.pose.inverse_transform_point(o);
+        const Vec3 ld = child.pose.inverse_transform_vector(d);
+        RayHit h = raycast_convex(*child.shape, lo, ld, best.hit ? best.distance : max_t);
+        if (!h.hit || (best.hit && h.distance >= best.distance)) continue;
+        h.point = child.pose.transform_point(h.point);
+        h.normal = child.pose.transform_vector(h.normal);
+        h.child = i;
+        best = h;
+        if (best.distance == 0) break;
+      }
+      return best;
+    }
+    default:
+      return raycast_convex(static_cast<const ConvexShape&>(shape), o, d, max_t);
+  }
+}
+
+}  // namespace
+
+DistanceResult distance(const Shape& a, const Pose& pose_a, const Shape& b, const Pose& pose_b,
+                        const GjkSettings& gjk) {
+  check_pose("pose_a", pose_a);
+  check_pose("pose_b", pose_b);
+  return pair_query(Mode::kDistance, a, pose_a, b, pose_b, gjk, EpaSettings{});
+}
+
+DistanceResult closest_points(const Shape& a, const Pose& pose_a, const Shape& b,
+                              const Pose& pose_b, const GjkSettings& gjk, const EpaSettings& epa) {
+  check_pose("pose_a", pose_a);
+  check_pose("pose_b", pose_b);
+  return pair_query(Mode::kSigned, a, pose_a, b, pose_b, gjk, epa);
+}
+
+DistanceResult penetration(const Shape& a, const Pose& pose_a, const Shape& b, const Pose& pose_b,
+                           const GjkSettings& gjk, const EpaSettings& epa) {
+  return closest_points(a, pose_a, b, pose_b, gjk, epa);
+}
+
+bool intersect(const Shape& a, const Pose& pose_a, const Shape& b, const Pose& pose_b,
+               const GjkSettings& gjk) {
+  check_pose("pose_a", pose_a);
+  check_pose("pose_b", pose_b);
+  bool supported = true;
+  return intersect_query(a, pose_a, b, pose_b, gjk, &supported);
+}
+
+RayHit raycast(const Shape& shape, const Pose& pose, const Vec3& origin, const Vec3& direction,
+               Real max_distance) {
+  require_finite("origin", origin);
+  if (!direction.allFinite() || direction.squaredNorm() == 0)
+    throw InvalidArgument("direction must be finite and non-zero, got " + to_string(direction));
+  if (std::isnan(max_distance) || max_distance < 0)
+    throw InvalidArgument("max_distance must be >= 0, got " + std::to_string(max_distance));
+  check_pose("pose", pose);
+  const Vec3 lo = pose.inverse_transform_point(origin);
+  const Vec3 ld = pose.inverse_transform_vector(direction);
+  RayHit h = raycast_local(shape, lo, ld, max_distance);
+  if (h.hit) {
+    // From the world ray itself: no round trip through the local frame.
+    h.point = origin + h.distance * direction;
+    h.normal = pose.transform_vector(h.normal);
+  }
+  return h;
+}
+
+}  // namespace wmo
