@@ -1,0 +1,187 @@
+#!/usr/bin/env python3
+"""Run the narrowphase benchmark, print a table per pair and plot the results.
+
+Runs bench_narrowphase (C++; see benchmarks/narrowphase/bench_narrowphase.cpp for what
+each method computes and how the error reference is chosen), which writes
+narrowphase.csv, tolerance_sweep.csv and reference_check.csv into --out, then writes
+narrowphase_time.png (ns/query per pair and method, log scale) and tolerance_sweep.png
+(depth error against ns/query as the GJK/EPA tolerance varies, log-log).
+
+Usage: .venv/bin/python benchmarks/narrowphase/run.py --out results/narrowphase
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import platform
+import subprocess
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+METHODS = ["wmo_special", "wmo_gjk_epa", "libccd_gjk_epa", "libccd_mpr", "fcl"]
+RATIOS = [
+    ("wmo_special", "libccd_gjk_epa"),
+    ("wmo_special", "fcl"),
+    ("wmo_gjk_epa", "libccd_gjk_epa"),
+    ("wmo_gjk_epa", "fcl"),
+]
+
+
+def find_binary(given: str | None) -> Path:
+    if given:
+        p = Path(given)
+        if not p.is_absolute():
+            p = REPO / p
+        if not p.exists():
+            sys.exit(f"run.py: --binary {p} does not exist")
+        return p
+    default = REPO / "build" / "py" / "bench_narrowphase"
+    if default.exists():
+        return default
+    found = sorted((REPO / "build").glob("*/bench_narrowphase"), key=lambda q: q.stat().st_mtime, reverse=True)
+    if not found:
+        sys.exit("run.py: no bench_narrowphase binary under build/; build it first "
+                 "(cmake --build build/py --target bench_narrowphase)")
+    return found[0]
+
+
+def read_csv(path: Path) -> list[dict[str, str]]:
+    with path.open() as f:
+        return list(csv.DictReader(f))
+
+
+def num(s: str) -> float:
+    try:
+        return float(s)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def fmt_ns(v: float) -> str:
+    return "-" if math.isnan(v) else f"{v:9.1f}"
+
+
+def fmt_err(v: float) -> str:
+    return "-" if math.isnan(v) else f"{v:9.2e}"
+
+
+def print_tables(rows: list[dict[str, str]]) -> None:
+    by_pair: dict[str, dict[str, dict[str, str]]] = defaultdict(dict)
+    for r in rows:
+        by_pair[r["pair"]][r["method"]] = r
+    for pair, ms in by_pair.items():
+        any_row = next(iter(ms.values()))
+        print(f"\n== {pair}  ({any_row['n_overlap']} overlapping, {any_row['n_separated']} separated)")
+        print(f"  {'method':<16}{'ns/query':>10}{'median err':>12}{'max err':>12}{'wrong verdicts':>16}")
+        for m in METHODS:
+            if m not in ms:
+                continue
+            r = ms[m]
+            print(f"  {m:<16}{fmt_ns(num(r['ns_per_query'])):>10}{fmt_err(num(r['median_error'])):>12}"
+                  f"{fmt_err(num(r['max_error'])):>12}{r.get('n_wrong_verdict', '-'):>16}")
+        parts = []
+        for a, b in RATIOS:
+            if a in ms and b in ms:
+                ratio = num(ms[a]["ns_per_query"]) / num(ms[b]["ns_per_query"])
+                parts.append(f"{a}/{b} = {ratio:.2f}")
+        if parts:
+            print("  time ratios: " + ", ".join(parts))
+
+
+def plot_times(rows: list[dict[str, str]], path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    pairs = list(dict.fromkeys(r["pair"] for r in rows))
+    present = [m for m in METHODS if any(r["method"] == m for r in rows)]
+    val = {(r["pair"], r["method"]): num(r["ns_per_query"]) for r in rows}
+    fig, ax = plt.subplots(figsize=(13, 5.5))
+    width = 0.8 / len(present)
+    for i, m in enumerate(present):
+        xs = [j + (i - (len(present) - 1) / 2) * width for j in range(len(pairs))]
+        ys = [val.get((p, m), math.nan) for p in pairs]
+        ax.bar(xs, ys, width, label=m)
+    ax.set_yscale("log")
+    ax.set_xticks(range(len(pairs)))
+    ax.set_xticklabels(pairs, rotation=20, ha="right")
+    ax.set_ylabel("time per query (ns, log scale)")
+    ax.set_title("Narrowphase: overlap test + penetration depth per query (median of 7 repetitions)")
+    ax.grid(axis="y", which="both", alpha=0.3)
+    ax.legend(ncol=len(present), fontsize=9, loc="upper left")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def plot_sweep(rows: list[dict[str, str]], path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    pairs = list(dict.fromkeys(r["pair"] for r in rows))
+    methods = list(dict.fromkeys(r["method"] for r in rows))
+    markers = {"wmo_gjk_epa": "o", "libccd_gjk_epa": "s", "libccd_mpr": "^"}
+    fig, axes = plt.subplots(1, len(pairs), figsize=(4.2 * len(pairs), 4.4), squeeze=False)
+    # Zero errors cannot be drawn on a log axis; plot them at a floor below round-off.
+    floor = 1e-17
+    for ax, pair in zip(axes[0], pairs):
+        for m in methods:
+            pts = [(num(r["ns_per_query"]), num(r["median_error"]), num(r["tolerance"]))
+                   for r in rows if r["pair"] == pair and r["method"] == m]
+            pts = [(t, max(e, floor), tol) for t, e, tol in pts if not (math.isnan(t) or math.isnan(e))]
+            if not pts:
+                continue
+            ax.plot([p[0] for p in pts], [p[1] for p in pts], marker=markers.get(m, "x"), label=m)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_title(pair)
+        ax.set_xlabel("ns per query")
+        ax.grid(which="both", alpha=0.3)
+    axes[0][0].set_ylabel("median |depth error| (m)")
+    axes[0][0].legend(fontsize=8)
+    fig.suptitle("Tolerance sweep 1e-2 .. 1e-10 (overlapping configurations; zero error drawn at 1e-17)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--out", default="results/narrowphase", help="output directory (default: results/narrowphase)")
+    ap.add_argument("--binary", default=None,
+                    help="bench_narrowphase executable (default: build/py/bench_narrowphase, else build/*/)")
+    ap.add_argument("--configs", type=int, default=4000, help="configurations per pair (default 4000)")
+    ap.add_argument("--no-run", action="store_true", help="only re-read the CSVs and re-plot")
+    args = ap.parse_args()
+
+    out = Path(args.out)
+    if not out.is_absolute():
+        out = Path.cwd() / out
+    out.mkdir(parents=True, exist_ok=True)
+    if not args.no_run:
+        binary = find_binary(args.binary)
+        print(f"[run.py] {binary} -> {out}  (machine: {platform.node()}, {platform.processor() or platform.machine()})")
+        subprocess.run([str(binary), str(out), str(args.configs)], check=True)
+
+    rows = read_csv(out / "narrowphase.csv")
+    print_tables(rows)
+    ref_path = out / "reference_check.csv"
+    if ref_path.exists():
+        print("\nReference check (overlapping configurations; libccd at tolerance 1e-10):")
+        for r in read_csv(ref_path):
+            print(f"  {r['pair']:<18} reference {r['reference']:<18} median |ref - libccd gjk/epa| "
+                  f"{fmt_err(num(r['median_diff_libccd_gjk_epa']))}  |ref - libccd mpr| "
+                  f"{fmt_err(num(r['median_diff_libccd_mpr']))}")
+    plot_times(rows, out / "narrowphase_time.png")
+    sweep = read_csv(out / "tolerance_sweep.csv")
+    plot_sweep(sweep, out / "tolerance_sweep.png")
+    print(f"\n[run.py] wrote {out / 'narrowphase_time.png'} and {out / 'tolerance_sweep.png'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
