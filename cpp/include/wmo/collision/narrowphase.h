@@ -23,6 +23,12 @@ struct CollideSettings {
   /// every convex pair, sphere-sphere and box-box included. Plane-convex pairs always
   /// use collide_plane_convex: a plane has no support point, so GJK cannot take it.
   bool use_special_routines = true;
+  /// Internal-edge handling for triangle meshes (collide_mesh_convex): contact normals
+  /// that come from flat or concave (internal) mesh edges and vertices are replaced by
+  /// the triangle's face normal, so shapes slide over a tessellated flat surface without
+  /// catching on its edges. False keeps the raw per-triangle GJK/EPA normals; meant for
+  /// tests and comparisons.
+  bool remove_internal_edges = true;
   GjkSettings gjk{};
   EpaSettings epa{};
 };
@@ -63,6 +69,16 @@ bool collide_convex_convex(const ConvexShape& a, const ConvexShape& b, const Pos
 
 /// Triangle mesh A against convex B: BVH query, one manifold per touching triangle
 /// (child_a = triangle index), with internal-edge correction. Appends to `out`.
+/// Triangles are two-sided: B behind a triangle gets the back side's normal (-n).
+/// Per triangle, GJK / EPA (triangle_convex) gives the normal; with
+/// settings.remove_internal_edges, a normal that comes from a flat or concave edge or
+/// vertex of the mesh (TriangleMesh::edge_is_convex) is replaced by the triangle's face
+/// normal, and one past a convex edge's neighbour is clamped to that neighbour's normal
+/// (collide_mesh.cpp states the rule). Points come from clipping B's supporting face
+/// against the triangle (or the triangle against B's face), depths measured along the
+/// manifold normal, reduced to at most 4; a triangle whose clipped manifold is empty
+/// (B lies over a neighbour, not over it) reports nothing. Allocates nothing beyond
+/// the growth of `out` (GJK / EPA use per-thread workspaces).
 void collide_mesh_convex(const TriangleMesh& a, const ConvexShape& b, const Pose& b_in_a,
                          const CollideSettings& settings, std::vector<Manifold>& out);
 
