@@ -1061,6 +1061,14 @@ class Epa {
           if (!sliver) r.status = QueryStatus::kMaxIterations;  // face pool full
           return r;
         }
+        // The new polytope contains the old one, so none of its faces can be closer to
+        // the origin than the face just popped, the closest of the old ones (van den
+        // Bergen 2001). A closer (typically inverted) face means round-off misjudged
+        // which faces see w, as happens when w lies within ~1e-12 of face f's plane on
+        // a curved support (cylinder rims): the polytope is no longer convex, and
+        // expanding it further pops faces with negative distance (depth 0 answers)
+        // and cycles. Stop with the popped face, whose bracket [d, dw] is still valid.
+        if (ws_.faces[nf].d < d - flat_tol()) return fallback;
         link(nf, 0, g, e);
         ws_.created.push_back(nf);
       }
