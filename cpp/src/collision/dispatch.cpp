@@ -65,13 +65,34 @@ inline void flip(Manifold& m) {
 template <class SA, class SB>
 using SpecialFn = bool (*)(const SA&, const SB&, const Pose&, Real, Manifold&);
 
+/// The SAT-based routines (capsule-box, box-box, hull-hull) measure a separated pair
+/// along their best separating axis, which is only a lower bound on the distance, and
+/// clipping may then report a gap that is too large or too small. A pair that is
+/// separated but within the margin (every point's depth < 0) is therefore handed to the
+/// generic path, whose GJK distance is exact, so speculative contacts carry the true
+/// gap. Overlapping pairs, the common case in a resting pile, stay on SAT.
+template <bool kExactSpeculative, class SA, class SB>
+bool refine_separated(const SA& a, const SB& b, const Pose& b_in_a,
+                      const CollideSettings& settings, Manifold& m) {
+  if constexpr (kExactSpeculative) {
+    if (m.max_depth() < 0) {
+      m = Manifold{};
+      return collide_convex_convex(a, b, b_in_a, settings, m);
+    }
+  }
+  return true;
+}
+
 /// Special routine for (SA, SB) called as is.
-template <class SA, class SB, SpecialFn<SA, SB> Fn>
+template <class SA, class SB, SpecialFn<SA, SB> Fn, bool kExactSpeculative = false>
 QueryStatus special(const Shape& a, const Pose& pose_a, const Shape& b, const Pose& pose_b,
                     const CollideSettings& settings, std::vector<Manifold>& out) {
   Manifold m;
-  if (Fn(static_cast<const SA&>(a), static_cast<const SB&>(b), relative_pose(pose_a, pose_b),
-         settings.margin, m)) {
+  const Pose b_in_a = relative_pose(pose_a, pose_b);
+  const auto& sa = static_cast<const SA&>(a);
+  const auto& sb = static_cast<const SB&>(b);
+  if (Fn(sa, sb, b_in_a, settings.margin, m) &&
+      refine_separated<kExactSpeculative>(sa, sb, b_in_a, settings, m)) {
     to_parent(m, pose_a);
     out.push_back(m);
   }
@@ -79,13 +100,16 @@ QueryStatus special(const Shape& a, const Pose& pose_a, const Shape& b, const Po
 }
 
 /// Special routine for (SA, SB) used for the pair (SB, SA): run in B's frame, flipped.
-template <class SA, class SB, SpecialFn<SA, SB> Fn>
+template <class SA, class SB, SpecialFn<SA, SB> Fn, bool kExactSpeculative = false>
 QueryStatus special_swapped(const Shape& a, const Pose& pose_a, const Shape& b,
                             const Pose& pose_b, const CollideSettings& settings,
                             std::vector<Manifold>& out) {
   Manifold m;
-  if (Fn(static_cast<const SA&>(b), static_cast<const SB&>(a), relative_pose(pose_b, pose_a),
-         settings.margin, m)) {
+  const Pose a_in_b = relative_pose(pose_b, pose_a);
+  const auto& sb = static_cast<const SA&>(b);
+  const auto& sa = static_cast<const SB&>(a);
+  if (Fn(sb, sa, a_in_b, settings.margin, m) &&
+      refine_separated<kExactSpeculative>(sb, sa, a_in_b, settings, m)) {
     to_parent(m, pose_b);
     flip(m);
     out.push_back(m);
@@ -205,10 +229,10 @@ constexpr Table make_table(bool special_routines) {
     t[S][C] = &special<Sphere, Capsule, collide_sphere_capsule>;
     t[C][S] = &special_swapped<Sphere, Capsule, collide_sphere_capsule>;
     t[C][C] = &special<Capsule, Capsule, collide_capsule_capsule>;
-    t[C][B] = &special<Capsule, Box, collide_capsule_box>;
-    t[B][C] = &special_swapped<Capsule, Box, collide_capsule_box>;
-    t[B][B] = &special<Box, Box, collide_box_box>;
-    t[H][H] = &special<ConvexHull, ConvexHull, collide_hull_hull>;
+    t[C][B] = &special<Capsule, Box, collide_capsule_box, true>;
+    t[B][C] = &special_swapped<Capsule, Box, collide_capsule_box, true>;
+    t[B][B] = &special<Box, Box, collide_box_box, true>;
+    t[H][H] = &special<ConvexHull, ConvexHull, collide_hull_hull, true>;
   }
   return t;
 }
