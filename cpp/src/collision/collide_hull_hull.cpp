@@ -26,11 +26,15 @@
 // Feature ids: clip::face_contact_id / clip::edge_contact_id (clip.h) with hull face
 // indices (faces()) and edge indices (edges()).
 //
-// Cost: O(F_A V_B + F_B V_A) for the face queries (less with hill-climbing support) and
-// O(E_A E_B) cheap Gauss-map tests. No allocation; ConvexHull is final, so its calls
-// are direct.
+// Cost: O(F_A V_B + F_B V_A) for the face queries (less with hill-climbing support),
+// then for each edge of B a walk over A's Gauss map along its arc (see the edge
+// queries): Gauss-map tests on the edges around the few vertices of A it passes,
+// instead of on all E_A edges (brute force only for degenerate arcs). Scratch
+// arrays live in a per-thread workspace that keeps its capacity (no allocation once
+// warm); ConvexHull is final, so its calls are direct.
 
 #include <cmath>
+#include <vector>
 
 #include "clip.h"
 #include "manifold_reduce.h"
@@ -76,6 +80,26 @@ inline int face_polygon(const ConvexHull& h, int f, const Pose* pose, Vec3* out)
 
 enum class AxisKind { kFaceA, kFaceB, kEdge };
 
+/// An edge of A with what the Gauss-map test and the separation need (A's frame).
+struct EdgeData {
+  Vec3 n1, n2, n2xn1;  ///< normals of the faces left and right of it, n2 x n1
+  Vec3 p0, dir;        ///< first vertex and direction (unnormalised)
+};
+
+/// Per-thread scratch space: its vectors keep their capacity, so after the first
+/// calls (the largest hulls seen) collide_hull_hull allocates nothing.
+struct Workspace {
+  std::vector<int> support_a;  ///< per face of B: A's support vertex along -normal
+  std::vector<EdgeData> edges_a;     ///< per edge of A (ConvexHull::edges() order)
+  std::vector<int> out_edge_a;       ///< per vertex of A: one half-edge leaving it
+  std::vector<int> edge_of_half_a;   ///< per half-edge of A: its edge index
+};
+
+Workspace& workspace() {
+  thread_local Workspace ws;
+  return ws;
+}
+
 }  // namespace
 
 bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_in_a, Real margin,
@@ -89,6 +113,7 @@ bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_i
   const auto& fb = b.faces();
 
   // ---- Face queries of A.
+  Workspace& ws = workspace();
   Real sep_a = -kInf;
   int face_a = 0;
   for (int f = 0; f < static_cast<int>(fa.size()); ++f) {
@@ -100,57 +125,134 @@ bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_i
       face_a = f;
     }
   }
-  // ---- Face queries of B (in B's frame).
+  // ---- Face queries of B (in B's frame). A's support vertex along each face's
+  // -normal is kept for the edge queries.
+  ws.support_a.resize(fb.size());
   Real sep_b = -kInf;
   int face_b = 0;
   for (int g = 0; g < static_cast<int>(fb.size()); ++g) {
-    const Vec3 q = a_in_b.transform_point(a.support_core(R * -fb[g].normal));
-    const Real s = fb[g].normal.dot(q) - fb[g].offset;
+    const int va = a.support_index(R * -fb[g].normal);
+    ws.support_a[g] = va;
+    const Real s = fb[g].normal.dot(a_in_b.transform_point(a.vertices()[va])) - fb[g].offset;
     if (s > reach) return false;
     if (s > sep_b) {
       sep_b = s;
       face_b = g;
     }
   }
-  // ---- Edge queries with Gauss-map pruning, in A's frame. Outer loop over B's edges
-  // so each is transformed once.
+  // ---- Edge queries with Gauss-map pruning, in A's frame.
+  //
+  // On A's Gauss map the directions whose support vertex is v form a spherically
+  // convex region bounded by the arcs of v's edges. The arc (c, d) of an edge of B (its
+  // face normals negated) runs from the region of A's support vertex along c to that
+  // along d, and the arcs of A it crosses, i.e. the edges of A that build a Minkowski
+  // face with it, are exactly the region boundaries it passes on the way: a geodesic
+  // arc meets a convex region in one piece, so it leaves each region through one edge
+  // of that region's vertex into the neighbouring vertex's region. So instead of
+  // testing every edge of A (E_A E_B tests, Gregorius's brute force), each edge of B
+  // walks that path: from the support vertex along c, test the edges around the
+  // current vertex (not the one it came in by) for a crossing, cross it, until the
+  // support vertex along d is reached. Both support vertices come from the face
+  // queries of B. An edge of B whose two are the same vertex crosses nothing (the
+  // arc stays in one region) and is skipped. The cost is the number of crossings
+  // times the vertex degree instead of E_A.
+  //
+  // Degenerate arcs (through a corner of the Gauss map, i.e. a face of A parallel to
+  // the edge of B, or starting on a region boundary because of a tie in the support)
+  // can leave the walk without a proper crossing to follow, or make it run longer than
+  // V_A steps; such an edge of B falls back to testing every edge of A. The walk only
+  // ever evaluates pairs that pass the Gauss-map test, so it never adds a wrong axis;
+  // the fallback makes sure none is missed.
   Vec3 centroid_a = Vec3::Zero();
   for (const Vec3& v : a.vertices()) centroid_a += v;
   centroid_a /= static_cast<Real>(a.vertices().size());
   const auto& ha = a.half_edges();
   const auto& hb = b.half_edges();
+  const int n_vert_a = static_cast<int>(a.vertices().size());
+  const int n_half_a = static_cast<int>(ha.size());
+  const int n_edge_a = static_cast<int>(a.edges().size());
+  ws.out_edge_a.assign(n_vert_a, -1);
+  for (int h = 0; h < n_half_a; ++h) ws.out_edge_a[ha[h].origin] = h;
+  ws.edge_of_half_a.resize(n_half_a);
+  ws.edges_a.resize(n_edge_a);
+  for (int k = 0; k < n_edge_a; ++k) {
+    const int h = a.edges()[k];
+    ws.edge_of_half_a[h] = k;
+    ws.edge_of_half_a[ha[h].twin] = k;
+    EdgeData& e = ws.edges_a[k];
+    e.n1 = fa[ha[h].face].normal;
+    e.n2 = fa[ha[ha[h].twin].face].normal;
+    e.n2xn1 = e.n2.cross(e.n1);
+    e.p0 = a.vertices()[ha[h].origin];
+    e.dir = a.vertices()[ha[ha[h].next].origin] - e.p0;
+  }
   Real sep_e = -kInf;
   int edge_a = -1, edge_b = -1;
   Vec3 n_e = Vec3::UnitX();
   for (int jb = 0; jb < static_cast<int>(b.edges().size()); ++jb) {
     const ConvexHull::HalfEdge& eb = hb[b.edges()[jb]];
+    const int g1 = eb.face, g2 = hb[eb.twin].face;
+    const int v_start = ws.support_a[g1], v_end = ws.support_a[g2];
+    if (v_start == v_end) continue;
     const Vec3 q0 = b_in_a.transform_point(b.vertices()[eb.origin]);
     const Vec3 q1 = b_in_a.transform_point(b.vertices()[hb[eb.next].origin]);
-    const Vec3 c = -(R * fb[eb.face].normal);
-    const Vec3 d = -(R * fb[hb[eb.twin].face].normal);
+    const Vec3 c = -(R * fb[g1].normal);
+    const Vec3 d = -(R * fb[g2].normal);
     const Vec3 dxc = d.cross(c);
     const Vec3 e2 = q1 - q0;
-    for (int ia = 0; ia < static_cast<int>(a.edges().size()); ++ia) {
-      const ConvexHull::HalfEdge& ea = ha[a.edges()[ia]];
-      const Vec3& na = fa[ea.face].normal;
-      const Vec3& nb = fa[ha[ea.twin].face].normal;
-      const Vec3 bxa = nb.cross(na);
-      if (!is_minkowski_face(na, nb, bxa, c, d, dxc)) continue;
-      const Vec3& p0 = a.vertices()[ea.origin];
-      const Vec3 e1 = a.vertices()[ha[ea.next].origin] - p0;
-      Vec3 n = e1.cross(e2);
+    const Real e2_len2 = e2.squaredNorm();
+    // Gauss-map test of A's edge k against this edge of B; for a Minkowski face, the
+    // separation along its normal (false: separated beyond the margin, stop).
+    bool separated = false;
+    auto crosses = [&](int k) {
+      const EdgeData& ea = ws.edges_a[k];
+      if (!is_minkowski_face(ea.n1, ea.n2, ea.n2xn1, c, d, dxc)) return false;
+      Vec3 n = ea.dir.cross(e2);
       const Real len = n.norm();
-      if (!(len > kParallelSin * std::sqrt(e1.squaredNorm() * e2.squaredNorm()))) continue;
-      n /= len;
-      if (n.dot(p0 - centroid_a) < 0) n = -n;
-      const Real s = n.dot(q0 - p0);
-      if (s > reach) return false;
-      if (s > sep_e) {
-        sep_e = s;
-        edge_a = ia;
-        edge_b = jb;
-        n_e = n;
+      if (len > kParallelSin * std::sqrt(ea.dir.squaredNorm() * e2_len2)) {
+        n /= len;
+        if (n.dot(ea.p0 - centroid_a) < 0) n = -n;
+        const Real s = n.dot(q0 - ea.p0);
+        if (s > reach) separated = true;
+        if (s > sep_e) {
+          sep_e = s;
+          edge_a = k;
+          edge_b = jb;
+          n_e = n;
+        }
       }
+      return true;
+    };
+    int v = v_start, came_by = -1;
+    bool walked = true;
+    for (int step = 0; v != v_end; ++step) {
+      if (step >= n_vert_a) {
+        walked = false;
+        break;
+      }
+      // Around v: its outgoing half-edges are h, twin(h).next, ...
+      const int h0 = ws.out_edge_a[v];
+      int h = h0, next_v = -1;
+      for (int guard = 0; h0 >= 0 && guard < n_half_a; ++guard) {
+        const int k = ws.edge_of_half_a[h];
+        if (k != came_by && crosses(k)) {
+          came_by = k;
+          next_v = ha[ha[h].twin].origin;
+          break;
+        }
+        h = ha[ha[h].twin].next;
+        if (h == h0) break;
+      }
+      if (separated) return false;
+      if (next_v < 0) {
+        walked = false;
+        break;
+      }
+      v = next_v;
+    }
+    if (!walked) {
+      for (int k = 0; k < n_edge_a; ++k) crosses(k);
+      if (separated) return false;
     }
   }
 

@@ -5,6 +5,8 @@
 // not the adapter's.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
@@ -159,6 +161,61 @@ constexpr double kSeparateSlack = 2e-6;
 constexpr double kUpperBoundSlack = 1e-9;
 constexpr double kOptimalitySlack = kUpperBoundSlack + 1e-8;
 
+// ---- Certificates for WMO's own distance answers ----------------------------------------
+//
+// FCL's distance is itself wrong by more than kDistanceTol on some configurations (first
+// seen: a capsule 0.45 mm from a hull, FCL 0.4554560 mm, the true 0.4542555 mm: FCL's
+// GJK treats the capsule as a curved support and stops early). Where FCL disagrees, WMO's
+// answer is judged by a certificate instead, which brackets the true distance without
+// trusting either library's GJK:
+//   lower bound: the gap along WMO's normal between the planes supporting A and B
+//     (separating-axis theorem: the distance is at least the gap along any direction);
+//   upper bound: |point_b - point_a| once both witness points are shown to lie in
+//     their shapes by a closed-form containment test.
+// WMO passes only if the bracket is tighter than kAnalyticTol and holds its distance.
+
+// Excess of world point x outside shape s at pose p (<= 0 inside), closed form per type.
+double outside_excess(const ConvexShape& s, const Pose& p, const Vec3& x) {
+  const Vec3 l = p.inverse_transform_point(x);
+  switch (s.type()) {
+    case ShapeType::kSphere: return l.norm() - s.radius();
+    case ShapeType::kBox: {
+      const Vec3 c = static_cast<const Box&>(s).core_half_extents();
+      return (l - l.cwiseMax(-c).cwiseMin(c)).norm() - s.radius();
+    }
+    case ShapeType::kCapsule: {
+      const double hh = static_cast<const Capsule&>(s).half_height();
+      return (l - Vec3(0, std::clamp(l.y(), -hh, hh), 0)).norm() - s.radius();
+    }
+    case ShapeType::kCylinder: {
+      const auto& c = static_cast<const Cylinder&>(s);
+      return std::max(std::hypot(l.x(), l.z()) - c.cylinder_radius(), std::abs(l.y()) - c.half_height());
+    }
+    default: {
+      double e = -kInf;
+      for (const auto& f : static_cast<const ConvexHull&>(s).faces()) e = std::max(e, f.normal.dot(l) - f.offset);
+      return e;
+    }
+  }
+}
+
+// True if WMO's distance answer r is certified to within kAnalyticTol (see above).
+// Containment is accepted up to 1e-12 m: round-off of coordinates up to ~5 m from the
+// origin is ~1e-15 m, and 1e-12 m is far below kAnalyticTol.
+bool distance_certified(const ConvexShape& a, const Pose& pa, const ConvexShape& b, const Pose& pb,
+                        const DistanceResult& r, double* lo_out, double* hi_out) {
+  const Vec3 n = r.normal;
+  const Vec3 sa = pa.transform_point(a.support(pa.inverse_transform_vector(n)));
+  const Vec3 sb = pb.transform_point(b.support(pb.inverse_transform_vector(-n)));
+  const double lo = n.dot(sb - sa);
+  const double hi = (r.point_b - r.point_a).norm();
+  *lo_out = lo;
+  *hi_out = hi;
+  constexpr double kContain = 1e-12;
+  return outside_excess(a, pa, r.point_a) <= kContain && outside_excess(b, pb, r.point_b) <= kContain &&
+         hi - lo <= kAnalyticTol && r.distance >= lo - kAnalyticTol && r.distance <= hi + kAnalyticTol;
+}
+
 std::string describe(const ConvexShape& s) {
   char buf[256];
   switch (s.type()) {
@@ -176,7 +233,14 @@ std::string describe(const ConvexShape& s) {
       std::snprintf(buf, sizeof buf, "Cylinder(%.17g, %.17g)", c.cylinder_radius(), c.half_height());
       break;
     }
-    default: std::snprintf(buf, sizeof buf, "ConvexHull(unit_hull_points() * %.17g)", s.local_aabb().max.norm()); break;
+    default: {
+      // The generator scales unit vectors, so the scale is the largest vertex norm (the
+      // bounding box's corner norm, printed before, is not the scale and gave wrong repros).
+      double scale = 0;
+      for (const Vec3& v : static_cast<const ConvexHull&>(s).vertices()) scale = std::max(scale, v.norm());
+      std::snprintf(buf, sizeof buf, "ConvexHull(unit_hull_points() * %.17g)", scale);
+      break;
+    }
   }
   return buf;
 }
@@ -216,7 +280,7 @@ TEST_P(CrossCheck, AgreesWithFclLibccdAndAnalytic) {
   ref::ConfigGenerator gen(7919 * (static_cast<int>(ta) + 1) + static_cast<int>(tb));
   const ccd_t ccd_tight = ref::make_ccd(1e-10, 1e-10);
   Failures verdict, dist, depth_exact, depth_valid, depth_optimal, nan_status;
-  int n_band = 0, n_checked_optimal = 0;
+  int n_band = 0, n_checked_optimal = 0, n_fcl_overruled = 0;
   for (int i = 0; i < n; ++i) {
     const auto cls = static_cast<ref::ConfigClass>(i % static_cast<int>(ref::ConfigClass::kCount));
     const ref::PairConfig c = gen.make(ta, tb, cls);
@@ -243,9 +307,14 @@ TEST_P(CrossCheck, AgreesWithFclLibccdAndAnalytic) {
       const double ref_d = exact ? *exact : ref::fcl_distance(fa, fb).signed_distance;
       const double tol = exact ? kAnalyticTol : kDistanceTol;
       if (!std::isfinite(wd.distance) || std::abs(wd.distance - ref_d) > tol) {
-        std::snprintf(msg, sizeof msg, "distance: wmo %.17g ref %.17g (%s)", wd.distance, ref_d,
-                      exact ? "analytic" : "fcl");
-        dist.add(c, msg);
+        double lo = 0, hi = 0;
+        if (!exact && std::isfinite(wd.distance) && distance_certified(a, c.pose_a, b, c.pose_b, wd, &lo, &hi)) {
+          ++n_fcl_overruled;  // FCL is the one off: the certificate brackets the truth
+        } else {
+          std::snprintf(msg, sizeof msg, "distance: wmo %.17g ref %.17g (%s)", wd.distance, ref_d,
+                        exact ? "analytic" : "fcl");
+          dist.add(c, msg);
+        }
       }
     }
 
@@ -275,6 +344,11 @@ TEST_P(CrossCheck, AgreesWithFclLibccdAndAnalytic) {
         depth_valid.add(c, msg);
       }
       // Optimality against libccd's answers that are themselves valid (upper bounds).
+      // Not for analytic pairs: the two-sided analytic check above is strictly stronger,
+      // and libccd 2.1's EPA at this tolerance never terminates on some sphere-sphere
+      // configurations (it tessellates both spheres forever: sphere_sphere config 3445
+      // of the default run hung in ccdGJKPenetration), so asking it would hang the test.
+      if (exact) continue;
       ref::CcdObject ca{&a, c.pose_a}, cb{&b, c.pose_b};
       for (const ref::RefResult& r : {ref::ccd_penetration_gjk(ca, cb, ccd_tight), ref::ccd_penetration_mpr(ca, cb, ccd_tight)}) {
         if (!r.intersecting || !r.normal.allFinite()) continue;
@@ -293,8 +367,9 @@ TEST_P(CrossCheck, AgreesWithFclLibccdAndAnalytic) {
       fb.place(c.pose_b);
     }
   }
-  std::printf("  %d configurations, %d in the touching band, %d libccd optimality checks\n", n, n_band,
-              n_checked_optimal);
+  std::printf("  %d configurations, %d in the touching band, %d libccd optimality checks, %d FCL distances "
+              "off by > %g m where WMO's is certified\n",
+              n, n_band, n_checked_optimal, n_fcl_overruled, kDistanceTol);
   EXPECT_EQ(verdict.count, 0) << "verdict disagreements with FCL outside the band:\n" << verdict.first;
   EXPECT_EQ(dist.count, 0) << "distance disagreements:\n" << dist.first;
   EXPECT_EQ(depth_exact.count, 0) << "depth disagreements with the analytic answer:\n" << depth_exact.first;

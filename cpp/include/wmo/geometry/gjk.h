@@ -411,6 +411,20 @@ constexpr Real kGjkTouchRel = 1e-13;
 // Floor of the termination test: |v|^2 - v.w is computed with an error of a few
 // DBL_EPSILON * |v| * |w|; 16 of them is the point below which the gap is noise.
 constexpr Real kGjkRoundoff = 16 * DBL_EPSILON;
+// When GJK stops making progress (|v| no longer decreases, or a support point repeats)
+// it normally does so at the resolution limit: on polytopes at round-off, on curved
+// supports (cylinders) once the clustered support points make the simplex as good as
+// double precision allows, with |v| - v.w / |v| at ~1e-12 of the size (measured on
+// random cylinder-box pairs). A stop with a bracket wider than kGjkStallRel of the
+// size, or with no separating plane at all (v.w <= 0), is instead the fault of an
+// ill-conditioned simplex: support points clustered on a cylinder rim make the signed
+// volumes of a tetrahedron that does contain the origin unreliable, and GJK would
+// report a positive distance for a pair that overlaps (observed: |v| = 1e-9 m for a
+// box and a cylinder overlapping by 1.2e-8 m). GJK then restarts from the newest
+// support point alone (as the ray cast below does), at most kGjkMaxRestarts times;
+// 1e-9 is GJK's documented accuracy on curved shapes, 1000x the legitimate stall.
+constexpr Real kGjkStallRel = 1e-9;
+constexpr int kGjkMaxRestarts = 4;
 
 // The GJK loop shared by gjk_distance (kBoolean = false) and gjk_intersect (true).
 // In boolean mode it stops as soon as a plane separates A - B from the ball of radius
@@ -438,6 +452,10 @@ GjkResult gjk_run(const SA& sa, const SB& sb, const Pose& b_in_a, const GjkSetti
   const Real tol = std::max(settings.tolerance, Real(0));
   const int max_it = std::max(settings.max_iterations, 1);
   bool separated = false;
+  int restarts = 0;
+  Simplex best{};
+  Vec3 best_v = Vec3::Zero();
+  Real best_dist2 = kInf;
 
   for (;;) {
     if (dist2 <= kGjkTouchRel * kGjkTouchRel * scale2) {
@@ -465,10 +483,35 @@ GjkResult gjk_run(const SA& sa, const SB& sb, const Pose& b_in_a, const GjkSetti
     }
     // Van den Bergen's relative test: |v|^2 - v.w bounds |v|^2 - dist^2 from above.
     if (dist2 - vw <= tol * dist2 + kGjkRoundoff * std::sqrt(dist2 * std::max(wn2, scale2))) break;
+    // The bracket is wider than round-off can explain: a stall here is the simplex's
+    // fault (see kGjkStallRel), so restarting from w alone can still make progress.
+    const bool can_restart =
+        restarts < kGjkMaxRestarts &&
+        (vw <= 0 || dist2 - vw > kGjkStallRel * std::sqrt(dist2 * std::max(wn2, scale2)));
+    auto restart = [&] {
+      ++restarts;
+      if (dist2 < best_dist2) {  // keep the best simplex in case the restart ends worse
+        best = s;
+        best_v = v;
+        best_dist2 = dist2;
+      }
+      s.w[0] = w;
+      s.a[0] = pa;
+      s.b[0] = pb;
+      s.lambda[0] = 1;
+      s.count = 1;
+      v = w;
+      dist2 = wn2;
+      scale2 = std::max(scale2, wn2);
+    };
     // A vertex seen again means no progress is possible (cycling on round-off).
     bool duplicate = false;
     for (int i = 0; i < s.count; ++i) duplicate = duplicate || (s.w[i] == w);
-    if (duplicate) break;
+    if (duplicate) {
+      if (!can_restart || s.count == 1) break;
+      restart();
+      continue;
+    }
 
     scale2 = std::max(scale2, wn2);
     const int n = s.count;
@@ -489,12 +532,21 @@ GjkResult gjk_run(const SA& sa, const SB& sb, const Pose& b_in_a, const GjkSetti
     }
     // |v| must decrease strictly (van den Bergen 2003, theorem 4.5); if round-off
     // stalls it, keep the previous simplex, which is the best answer available.
-    if (!(d2_new < dist2)) break;
+    if (!(d2_new < dist2)) {
+      if (!can_restart) break;
+      restart();
+      continue;
+    }
     compact_simplex(s, sub);
     v = v_new;
     dist2 = d2_new;
   }
 
+  if (!res.intersecting && best_dist2 < dist2) {
+    s = best;
+    v = best_v;
+    dist2 = best_dist2;
+  }
   Vec3 pa = Vec3::Zero(), pb = Vec3::Zero();
   for (int i = 0; i < s.count; ++i) {
     pa += s.lambda[i] * s.a[i];
@@ -643,6 +695,11 @@ class Epa {
   Vec3 b_pos_;
   int max_faces_ = 0, max_verts_ = 0;
   Real scale_ = 0;  // max |w| over the polytope's vertices
+  // Smallest support distance seen in expand(), the face normal it was found along, and
+  // the support point of A that realised it (see capped()).
+  Real upper_ = kInf;
+  Vec3 upper_normal_ = Vec3::UnitX();
+  Vec3 upper_point_a_ = Vec3::Zero();
 
   int push_vertex(const Vec3& w, const Vec3& a, const Vec3& b) {
     ws_.w.push_back(w);
@@ -963,8 +1020,33 @@ class Epa {
     return r;
   }
 
+  // Answer for a stop before convergence (cap reached, or a polytope that cannot be
+  // expanded consistently). The closest face gives a lower bound d on the depth, but
+  // translating B by d along its normal leaves the sets overlapping by up to the
+  // support distance along it minus d, which on curved supports stays wide when the
+  // cap cuts EPA short (a sphere centre near a cylinder's axis: every radial direction
+  // is nearly as shallow, and 128 iterations leave the polytope 1.7e-5 m inside). The
+  // smallest support distance seen, `upper` along `upper_normal_`, is instead an
+  // upper bound that is itself a valid answer: translating B by it along that normal
+  // makes the sets touch exactly (van den Bergen 2001's upper bound). Such stops keep
+  // their non-kOk status, and answer with the valid upper bound whenever the bracket
+  // is wider than the requested tolerance, so that a penetration answer always
+  // separates the pair. (A converged answer has a bracket within tolerance anyway.)
+  EpaResult capped(const EpaResult& lower) const {
+    if (lower.status == QueryStatus::kOk || !(upper_ < kInf)) return lower;
+    const Real tol = std::max(st_.tolerance * std::abs(lower.depth), st_.absolute_tolerance);
+    if (!(upper_ - lower.depth > tol)) return lower;
+    EpaResult r = lower;
+    r.depth = std::max(upper_, Real(0));
+    r.normal = upper_normal_;
+    // The deepest point of A along the normal; B's witness on the plane it is moved to.
+    r.point_a = upper_point_a_;
+    r.point_b = upper_point_a_ - r.depth * upper_normal_;
+    return r;
+  }
+
   EpaResult expand() {
-    Real upper = kInf;  // smallest support distance seen: an upper bound on the depth
+    Real& upper = upper_;  // smallest support distance seen: an upper bound on the depth
     // Answer of the last face popped, kept by value: the face itself is recycled.
     EpaResult last;
     bool have_last = false;
@@ -988,14 +1070,18 @@ class Epa {
         // Every face pruned or gone: only round-off can do this.
         return have_last ? last : degenerate_answer();
       }
-      if (it >= max_it) return answer_from_face(f, QueryStatus::kMaxIterations, it);
+      if (it >= max_it) return capped(answer_from_face(f, QueryStatus::kMaxIterations, it));
 
       const Vec3 n = ws_.faces[f].n;
       const Real d = ws_.faces[f].d;
       Vec3 pa, pb;
       const Vec3 w = support_(n, pa, pb);
       const Real dw = n.dot(w);
-      upper = std::min(upper, dw);
+      if (dw < upper) {
+        upper = dw;
+        upper_normal_ = n;
+        upper_point_a_ = pa;
+      }
       // Converged when the support plane along this face's own normal is within
       // tolerance of the face (relative to the depth, or absolute for near-zero
       // depths): then translating B by d * n separates the sets up to that tolerance.
@@ -1008,10 +1094,11 @@ class Epa {
       if (w == ws_.w[fv[0]] || w == ws_.w[fv[1]] || w == ws_.w[fv[2]])
         return answer_from_face(f, QueryStatus::kOk, it);
       if (static_cast<int>(ws_.w.size()) >= max_verts_)
-        return answer_from_face(f, QueryStatus::kMaxIterations, it);
+        return capped(answer_from_face(f, QueryStatus::kMaxIterations, it));
       const QueryStatus stuck = dw - d <= kEpaResolutionRel * scale_ ? QueryStatus::kOk
                                                                         : QueryStatus::kDegenerate;
-      const EpaResult fallback = answer_from_face(f, stuck, it);
+      const EpaResult lower_answer = answer_from_face(f, stuck, it);
+      const EpaResult fallback = capped(lower_answer);
       last = fallback;
       have_last = true;
       const int wi = push_vertex(w, pa, pb);
@@ -1057,9 +1144,10 @@ class Epa {
         bool sliver;
         const int nf = new_face(p, q, wi, sliver);
         if (nf < 0) {
-          EpaResult r = fallback;
-          if (!sliver) r.status = QueryStatus::kMaxIterations;  // face pool full
-          return r;
+          if (sliver) return fallback;
+          EpaResult r = lower_answer;  // face pool full
+          r.status = QueryStatus::kMaxIterations;
+          return capped(r);
         }
         // The new polytope contains the old one, so none of its faces can be closer to
         // the origin than the face just popped, the closest of the old ones (van den
