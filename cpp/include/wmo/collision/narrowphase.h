@@ -64,6 +64,8 @@ bool collide_sphere_capsule(const Sphere& a, const Capsule& b, const Pose& b_in_
 bool collide_capsule_capsule(const Capsule& a, const Capsule& b, const Pose& b_in_a, Real margin, Manifold& m);
 bool collide_capsule_box(const Capsule& a, const Box& b, const Pose& b_in_a, Real margin, Manifold& m);
 bool collide_box_box(const Box& a, const Box& b, const Pose& b_in_a, Real margin, Manifold& m);
+/// Hull-hull keeps its edge-query scratch arrays in a per-thread workspace that grows
+/// to the largest hulls seen: it allocates only while that happens, never once warm.
 bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_in_a, Real margin, Manifold& m);
 /// Plane A against any convex shape B.
 bool collide_plane_convex(const Plane& a, const ConvexShape& b, const Pose& b_in_a, Real margin, Manifold& m);
