@@ -576,6 +576,9 @@ GjkResult gjk_run(const SA& sa, const SB& sb, const Pose& b_in_a, const GjkSetti
 /// closest points and normal in A's frame; `intersecting` when the sets touch or
 /// overlap (then distance = 0 and `simplex` seeds EPA). Never allocates, never returns
 /// NaN for finite input, stops after settings.max_iterations support calls at most.
+/// A stall without a separating plane (an ill-conditioned simplex on curved supports)
+/// restarts the simplex from the newest support point, at most kGjkMaxRestarts times;
+/// the best simplex seen is what is reported.
 template <class SA, class SB>
 GjkResult gjk_distance(const SA& sa, const SB& sb, const Pose& b_in_a, const GjkSettings& s = {},
                        const Vec3& initial_dir = Vec3::UnitX()) {
@@ -600,9 +603,12 @@ bool gjk_intersect(const SA& sa, const SB& sb, const Pose& b_in_a, const GjkSett
 /// Result of epa_penetration. All vectors in A's frame.
 struct EpaResult {
   /// kOk; kMaxIterations when EpaSettings::max_iterations or max_faces stopped the
-  /// expansion (depth is then a lower bound, the best face so far); kDegenerate when
-  /// A - B is a single point (normal undefined: a fallback direction is returned with
-  /// depth 0) or the polytope could not be expanded consistently (best face so far).
+  /// expansion; kDegenerate when A - B is a single point (normal undefined: a fallback
+  /// direction is returned with depth 0) or the polytope could not be expanded
+  /// consistently. After such a stop the answer is the best valid one found: the
+  /// smallest support distance seen and its normal (an upper bound on the depth;
+  /// translating B by depth * normal still makes the sets touch), unless the closest
+  /// face is already within tolerance of it.
   QueryStatus status = QueryStatus::kOk;
   /// Penetration depth (m), >= 0: translating B by depth * normal makes the sets touch.
   Real depth = 0;
@@ -1191,11 +1197,15 @@ class Epa {
 ///     exactly, normal perpendicular to the flat set, status kOk;
 ///   * A - B a single point (e.g. two concentric sphere cores): depth 0, normal along
 ///     b_in_a.position (or +X), status kDegenerate;
-///   * a polytope that cannot be expanded consistently (sliver faces from round-off,
-///     typically on curved cores such as cylinders): the closest face found so far (a
-///     lower bound on the depth); kOk if the support distance along its normal is
-///     within kEpaResolutionRel (1e-8) of the size above it, else kDegenerate;
-///   * iteration or face cap reached: the closest face so far, kMaxIterations.
+///   * a polytope that cannot be expanded consistently (sliver faces, or a new face
+///     closer than the one expanded, from round-off, typically on curved cores such as
+///     cylinders): the closest face found so far, kOk, if the support distance along
+///     its normal is within kEpaResolutionRel (1e-8) of the size above it; otherwise
+///     kDegenerate with the best valid answer (smallest support distance seen, an upper
+///     bound on the depth along its normal);
+///   * iteration or face cap reached: kMaxIterations with that best valid answer
+///     (never a lower bound that leaves the pair overlapping, never depth 0 for a
+///     clearly overlapping pair).
 template <class SA, class SB>
 EpaResult epa_penetration(const SA& sa, const SB& sb, const Pose& b_in_a, const GjkResult& gjk,
                           const EpaSettings& settings = {}) {
