@@ -31,10 +31,17 @@
 // queries): Gauss-map tests on the edges around the few vertices of A it passes,
 // instead of on all E_A edges (brute force only for degenerate arcs). Scratch
 // arrays live in a per-thread workspace that keeps its capacity (no allocation once
-// warm); ConvexHull is final, so its calls are direct.
+// warm); ConvexHull is final, so its calls are direct. For hulls up to 32 vertices
+// the support searches run on coordinate arrays (VertexSoA, vectorised, same vertex
+// as ConvexHull::support_index), A's face queries skip faces whose cheap upper bound
+// cannot win (exact pruning, kPruneSlack), B's skip the transform of the support point
+// likewise, and A's edge data are built only for the edges the walks touch.
 
 #include <cmath>
 #include <vector>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 #include "clip.h"
 #include "manifold_reduce.h"
@@ -80,6 +87,78 @@ inline int face_polygon(const ConvexHull& h, int f, const Pose* pose, Vec3* out)
 
 enum class AxisKind { kFaceA, kFaceB, kEdge };
 
+/// Slack of the face-query pruning bound, relative to the scene's size (hull size plus
+/// the distance between the origins): the bound and the separation it bounds are
+/// computed along different paths (A's frame vs B's frame, centroid vs vertex) and may
+/// differ by round-off, a few DBL_EPSILON (2.2e-16) times that size; 1e-9 is ~10^6
+/// times more, so a face is only skipped when it provably cannot win, and it costs
+/// nothing measurable in pruning power.
+constexpr Real kPruneSlack = 1e-9;
+
+/// ConvexHull::support_index finds the support vertex by brute force up to this many
+/// vertices (kBruteForceSupportMax in convex_hull.cpp) and by hill climbing above,
+/// which may pick another vertex on ties. The face queries replicate the brute force
+/// (VertexSoA) only where the hull uses it, so the chosen vertices, and so the
+/// results, are the same as with the hull's own support.
+constexpr std::size_t kBruteSupportMax = 32;
+
+/// A hull's vertices as three coordinate arrays, so the face queries' dot products
+/// over all vertices vectorise (the brute-force support of ConvexHull::support_index
+/// handles one vertex at a time behind a data-dependent branch, and was two thirds of
+/// this routine's time for 20-vertex hulls). `dots` is the scratch for one direction.
+struct VertexSoA {
+  std::vector<Real> x, y, z, dots;
+  void assign(const std::vector<Vec3>& v) {
+    const std::size_t n = v.size();
+    x.resize(n);
+    y.resize(n);
+    z.resize(n);
+    dots.resize(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      x[i] = v[i].x();
+      y[i] = v[i].y();
+      z[i] = v[i].z();
+    }
+  }
+  /// Index of the vertex maximising dot(v, d): the first one on ties, with the same
+  /// arithmetic as Vec3::dot, so it is the vertex ConvexHull::support_index's brute
+  /// force (hulls up to 32 vertices) returns, bit for bit.
+  int support_index(const Vec3& d, Real* max_dot = nullptr) {
+    const int n = static_cast<int>(x.size());
+    const Real dx = d.x(), dy = d.y(), dz = d.z();
+    Real* __restrict out = dots.data();
+    const Real* __restrict px = x.data();
+    const Real* __restrict py = y.data();
+    const Real* __restrict pz = z.data();
+    // The dots and their maximum in one branch-free pass, then the first vertex
+    // reaching the maximum: the same vertex as a scan keeping the first strict maximum
+    // (dots are finite, no NaN). Same operations in the same order as the scalar
+    // expression, so the same bits.
+    int i = 0;
+    Real max_d = -kInf;
+#ifdef __SSE2__
+    const __m128d vdx = _mm_set1_pd(dx), vdy = _mm_set1_pd(dy), vdz = _mm_set1_pd(dz);
+    __m128d m2 = _mm_set1_pd(-kInf);
+    for (; i + 2 <= n; i += 2) {
+      const __m128d t = _mm_add_pd(_mm_add_pd(_mm_mul_pd(_mm_loadu_pd(px + i), vdx),
+                                              _mm_mul_pd(_mm_loadu_pd(py + i), vdy)),
+                                   _mm_mul_pd(_mm_loadu_pd(pz + i), vdz));
+      _mm_storeu_pd(out + i, t);
+      m2 = _mm_max_pd(m2, t);
+    }
+    max_d = std::max(_mm_cvtsd_f64(m2), _mm_cvtsd_f64(_mm_unpackhi_pd(m2, m2)));
+#endif
+    for (; i < n; ++i) {
+      out[i] = (px[i] * dx + py[i] * dy) + pz[i] * dz;
+      max_d = std::max(max_d, out[i]);
+    }
+    for (i = 0; i < n - 1; ++i)
+      if (out[i] == max_d) break;
+    if (max_dot) *max_dot = max_d;
+    return i;
+  }
+};
+
 /// An edge of A with what the Gauss-map test and the separation need (A's frame).
 struct EdgeData {
   Vec3 n1, n2, n2xn1;  ///< normals of the faces left and right of it, n2 x n1
@@ -93,6 +172,8 @@ struct Workspace {
   std::vector<EdgeData> edges_a;     ///< per edge of A (ConvexHull::edges() order)
   std::vector<int> out_edge_a;       ///< per vertex of A: one half-edge leaving it
   std::vector<int> edge_of_half_a;   ///< per half-edge of A: its edge index
+  std::vector<char> edge_ready_a;    ///< per edge of A: edges_a[k] filled this call
+  VertexSoA verts_a, verts_b;        ///< A's and B's vertices, each in its own frame
 };
 
 Workspace& workspace() {
@@ -114,15 +195,36 @@ bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_i
 
   // ---- Face queries of A.
   Workspace& ws = workspace();
+  const bool brute_a = a.vertices().size() <= kBruteSupportMax;
+  const bool brute_b = b.vertices().size() <= kBruteSupportMax;
+  if (brute_a) ws.verts_a.assign(a.vertices());
+  if (brute_b) ws.verts_b.assign(b.vertices());
+  //
+  // Pruning (exact): s_f = min over B's vertices v of n_f.v - offset_f is at most
+  // n_f.x - offset_f for any point x of B, e.g. B's vertex centroid and the deepest
+  // vertex found so far (the support point of the current best face). A face whose
+  // bound is below the best separation so far by more than kPruneSlack cannot become
+  // the best (the selection takes a strictly larger separation) nor end the test (the
+  // best is <= reach, or it would have), so its support search is skipped: most faces
+  // then cost two dot products instead of V_B. Results are unchanged.
+  const Real prune_slack = kPruneSlack * (size + b_in_a.position.norm());
+  Vec3 centroid_b = Vec3::Zero();
+  for (const Vec3& v : b.vertices()) centroid_b += v;
+  centroid_b = b_in_a.transform_point(centroid_b / static_cast<Real>(b.vertices().size()));
+  Vec3 deepest_b = centroid_b;
   Real sep_a = -kInf;
   int face_a = 0;
   for (int f = 0; f < static_cast<int>(fa.size()); ++f) {
-    const Vec3 p = b_in_a.transform_point(b.support_core(R.transpose() * -fa[f].normal));
-    const Real s = fa[f].normal.dot(p) - fa[f].offset;
+    const Vec3& nf = fa[f].normal;
+    if (std::min(nf.dot(centroid_b), nf.dot(deepest_b)) - fa[f].offset < sep_a - prune_slack) continue;
+    const Vec3 p = b_in_a.transform_point(b.vertices()[brute_b ? ws.verts_b.support_index(R.transpose() * -nf)
+                                                               : b.support_index(R.transpose() * -nf)]);
+    const Real s = nf.dot(p) - fa[f].offset;
     if (s > reach) return false;
     if (s > sep_a) {
       sep_a = s;
       face_a = f;
+      deepest_b = p;
     }
   }
   // ---- Face queries of B (in B's frame). A's support vertex along each face's
@@ -131,8 +233,17 @@ bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_i
   Real sep_b = -kInf;
   int face_b = 0;
   for (int g = 0; g < static_cast<int>(fb.size()); ++g) {
-    const int va = a.support_index(R * -fb[g].normal);
+    Real max_dot = kInf;
+    const int va = brute_a ? ws.verts_a.support_index(R * -fb[g].normal, &max_dot)
+                           : a.support_index(R * -fb[g].normal);
     ws.support_a[g] = va;
+    // Pruning (exact), as for A's faces: s below is, up to round-off, -max_dot +
+    // n_g.(a_in_b.position) - offset_g; if even that plus the slack can neither beat
+    // the best nor exceed reach, the exact value (a quaternion transform) is not needed.
+    if (max_dot < kInf) {
+      const Real approx = -max_dot + fb[g].normal.dot(a_in_b.position) - fb[g].offset;
+      if (approx + prune_slack < sep_b && approx + prune_slack < reach) continue;
+    }
     const Real s = fb[g].normal.dot(a_in_b.transform_point(a.vertices()[va])) - fb[g].offset;
     if (s > reach) return false;
     if (s > sep_b) {
@@ -175,17 +286,27 @@ bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_i
   for (int h = 0; h < n_half_a; ++h) ws.out_edge_a[ha[h].origin] = h;
   ws.edge_of_half_a.resize(n_half_a);
   ws.edges_a.resize(n_edge_a);
+  // Edge data of A are filled on first use: the walks touch only the edges around the
+  // few vertices they pass, usually a fraction of E_A.
+  ws.edge_ready_a.assign(n_edge_a, 0);
   for (int k = 0; k < n_edge_a; ++k) {
     const int h = a.edges()[k];
     ws.edge_of_half_a[h] = k;
     ws.edge_of_half_a[ha[h].twin] = k;
-    EdgeData& e = ws.edges_a[k];
-    e.n1 = fa[ha[h].face].normal;
-    e.n2 = fa[ha[ha[h].twin].face].normal;
-    e.n2xn1 = e.n2.cross(e.n1);
-    e.p0 = a.vertices()[ha[h].origin];
-    e.dir = a.vertices()[ha[ha[h].next].origin] - e.p0;
   }
+  auto edge_data_a = [&](int k) -> const EdgeData& {
+    EdgeData& e = ws.edges_a[k];
+    if (!ws.edge_ready_a[k]) {
+      ws.edge_ready_a[k] = 1;
+      const int h = a.edges()[k];
+      e.n1 = fa[ha[h].face].normal;
+      e.n2 = fa[ha[ha[h].twin].face].normal;
+      e.n2xn1 = e.n2.cross(e.n1);
+      e.p0 = a.vertices()[ha[h].origin];
+      e.dir = a.vertices()[ha[ha[h].next].origin] - e.p0;
+    }
+    return e;
+  };
   Real sep_e = -kInf;
   int edge_a = -1, edge_b = -1;
   Vec3 n_e = Vec3::UnitX();
@@ -205,7 +326,7 @@ bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_i
     // separation along its normal (false: separated beyond the margin, stop).
     bool separated = false;
     auto crosses = [&](int k) {
-      const EdgeData& ea = ws.edges_a[k];
+      const EdgeData& ea = edge_data_a(k);
       if (!is_minkowski_face(ea.n1, ea.n2, ea.n2xn1, c, d, dxc)) return false;
       Vec3 n = ea.dir.cross(e2);
       const Real len = n.norm();
