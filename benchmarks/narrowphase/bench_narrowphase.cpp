@@ -1,7 +1,11 @@
 // Narrowphase benchmark: WMO's special routines and generic GJK/EPA against libccd 2.1
 // (GJK/EPA and MPR) and FCL 0.7, on the same random configurations.
 //
-// Usage: bench_narrowphase [out_dir=results/narrowphase] [configs_per_pair=4000]
+// Usage: bench_narrowphase [out_dir=results/narrowphase] [configs_per_pair=4000] [pairs]
+// `pairs` is an optional comma-separated list of pair names (e.g. box_box,hull_hull) to
+// run only those; the CSVs then hold only them. The environment variable
+// WMO_BENCH_METHODS (comma-separated method names) likewise limits the methods timed,
+// which is how a profiler is pointed at one routine.
 // Writes out_dir/narrowphase.csv, out_dir/tolerance_sweep.csv, out_dir/reference_check.csv.
 //
 // What each method computes, per configuration (the same question for all: "do A and B
@@ -230,6 +234,7 @@ std::string fmt(double v) {
 int main(int argc, char** argv) {
   const std::string out_dir = argc > 1 ? argv[1] : "results/narrowphase";
   const int n = argc > 2 ? std::max(8, std::atoi(argv[2])) : 4000;
+  const std::string only = argc > 3 ? "," + std::string(argv[3]) + "," : "";
   std::filesystem::create_directories(out_dir);
   std::ofstream csv(out_dir + "/narrowphase.csv");
   csv << "pair,method,ns_per_query,median_error,max_error,n_overlap,n_separated,n_wrong_verdict\n";
@@ -254,6 +259,7 @@ int main(int argc, char** argv) {
 
   std::uint64_t seed = 1;
   for (const PairSpec& p : kPairs) {
+    if (!only.empty() && only.find("," + std::string(p.name) + ",") == std::string::npos) continue;
     std::vector<Case> cases = make_cases(p, n, 1000 + seed++);
     int n_overlap = 0;
     for (auto& c : cases) n_overlap += c.overlap;
@@ -288,8 +294,12 @@ int main(int argc, char** argv) {
          },
          true},
     };
+    const char* only_methods = std::getenv("WMO_BENCH_METHODS");
     for (const Method& m : methods) {
       if (!m.enabled) continue;
+      if (only_methods && ("," + std::string(only_methods) + ",").find("," + std::string(m.name) + ",") ==
+                              std::string::npos)
+        continue;
       const double ns = time_ns(cases, m.q, R);
       const ErrorStats e = errors(cases, m.q);
       csv << p.name << ',' << m.name << ',' << fmt(ns) << ',' << fmt(e.median_error) << ',' << fmt(e.max_error)
@@ -297,6 +307,8 @@ int main(int argc, char** argv) {
       std::printf("%-18s %-15s %10.1f ns  err median %-10s max %-10s wrong verdicts %d\n", p.name, m.name, ns,
                   fmt(e.median_error).c_str(), fmt(e.max_error).c_str(), e.wrong_verdicts);
     }
+
+    if (only_methods) continue;  // profiling one method: no reference check, no sweep
 
     // Cross-check of the reference against libccd at a tight tolerance.
     {

@@ -178,13 +178,15 @@ struct TriangleSupport {
 
 /// GJK's simplex: up to 4 vertices w = a - b of the Minkowski difference A - B, with the
 /// support points on A (`a`) and on B (`b`, in A's frame) that produced them, and the
-/// barycentric coordinates of the point of the simplex closest to the origin.
+/// barycentric coordinates of the point of the simplex closest to the origin. Only the
+/// first `count` entries are meaningful; the rest are left uninitialised (GJK copies
+/// simplices in its inner loop, and zeroing 40 doubles each time is measurable).
 struct Simplex {
   int count = 0;
-  std::array<Vec3, 4> w{};
-  std::array<Vec3, 4> a{};
-  std::array<Vec3, 4> b{};
-  std::array<Real, 4> lambda{};
+  std::array<Vec3, 4> w;
+  std::array<Vec3, 4> a;
+  std::array<Vec3, 4> b;
+  std::array<Real, 4> lambda;
 };
 
 /// Result of gjk_distance. All vectors in A's frame.
@@ -204,7 +206,7 @@ struct GjkResult {
   Vec3 normal = Vec3::Zero();
   int iterations = 0;
   /// Final simplex (EPA's seed when intersecting).
-  Simplex simplex{};
+  Simplex simplex;
 };
 
 namespace detail {
@@ -453,7 +455,7 @@ GjkResult gjk_run(const SA& sa, const SB& sb, const Pose& b_in_a, const GjkSetti
   const int max_it = std::max(settings.max_iterations, 1);
   bool separated = false;
   int restarts = 0;
-  Simplex best{};
+  Simplex best;  // filled before it is read (best_dist2 < kInf)
   Vec3 best_v = Vec3::Zero();
   Real best_dist2 = kInf;
 
@@ -700,7 +702,8 @@ class Epa {
   EpaWorkspace& ws_;
   Vec3 b_pos_;
   int max_faces_ = 0, max_verts_ = 0;
-  Real scale_ = 0;  // max |w| over the polytope's vertices
+  Real scale_ = 0;   // max |w| over the polytope's vertices
+  Real scale2_ = 0;  // its square
   // Smallest support distance seen in expand(), the face normal it was found along, and
   // the support point of A that realised it (see capped()).
   Real upper_ = kInf;
@@ -711,7 +714,11 @@ class Epa {
     ws_.w.push_back(w);
     ws_.a.push_back(a);
     ws_.b.push_back(b);
-    scale_ = std::max(scale_, w.norm());
+    const Real w2 = w.squaredNorm();
+    if (w2 > scale2_) {
+      scale2_ = w2;
+      scale_ = std::sqrt(w2);
+    }
     return static_cast<int>(ws_.w.size()) - 1;
   }
   int add_support(const Vec3& dir) {
@@ -955,14 +962,15 @@ class Epa {
       f[k] = new_face(fv[k][0], fv[k][1], fv[k][2], sliver);
       if (f[k] < 0) return false;
     }
-    // Adjacency by matching each directed edge with its reverse.
-    for (int p = 0; p < 4; ++p)
-      for (int e = 0; e < 3; ++e) {
-        const int s0 = fv[p][e], s1 = fv[p][(e + 1) % 3];
-        for (int q = p + 1; q < 4; ++q)
-          for (int h = 0; h < 3; ++h)
-            if (fv[q][h] == s1 && fv[q][(h + 1) % 3] == s0) link(f[p], e, f[q], h);
-      }
+    // Adjacency of the four faces above: edge e of face p (fv[p][e] -> fv[p][e+1]) is
+    // edge h of face q in reverse. Written out from fv (e.g. face 0's edge 0, 0 -> i2,
+    // is face 3's edge 2, i2 -> 0); the tests compare EPA against brute-force depths.
+    link(f[0], 0, f[3], 2);
+    link(f[0], 1, f[2], 0);
+    link(f[0], 2, f[1], 0);
+    link(f[1], 1, f[2], 2);
+    link(f[1], 2, f[3], 0);
+    link(f[2], 1, f[3], 1);
     for (int k = 0; k < 4; ++k) heap_push(f[k], kInf);
     return true;
   }
@@ -981,6 +989,28 @@ class Epa {
       l[0] = 1 - l[1] - l[2];
     }
     return l;
+  }
+
+  // The answer along face f's plane (normal n, distance d) with the witness points
+  // interpolated over the triangle `v` at barycentric coordinates `l`, clamped.
+  EpaResult answer_from(const std::array<int, 3>& v, std::array<Real, 3> l, const Vec3& n, Real d,
+                        QueryStatus status, int iterations) const {
+    // Whatever is outside is round-off or a non-coplanar neighbour: clamp.
+    Real sum = 0;
+    for (Real& x : l) sum += (x = std::max(x, Real(0)));
+    if (sum > 0) {
+      for (Real& x : l) x /= sum;
+    } else {
+      l = {Real(1) / 3, Real(1) / 3, Real(1) / 3};
+    }
+    EpaResult r;
+    r.status = status;
+    r.depth = std::max(d, Real(0));
+    r.normal = n;
+    r.point_a = l[0] * ws_.a[v[0]] + l[1] * ws_.a[v[1]] + l[2] * ws_.a[v[2]];
+    r.point_b = l[0] * ws_.b[v[0]] + l[1] * ws_.b[v[1]] + l[2] * ws_.b[v[2]];
+    r.iterations = iterations;
+    return r;
   }
 
   EpaResult answer_from_face(int f, QueryStatus status, int iterations) const {
@@ -1007,23 +1037,49 @@ class Epa {
       g = h;
       l = barycentric(g, p);
     }
-    // Whatever is left outside is round-off or a non-coplanar neighbour: clamp.
-    Real sum = 0;
-    for (Real& x : l) sum += (x = std::max(x, Real(0)));
-    if (sum > 0) {
-      for (Real& x : l) x /= sum;
-    } else {
-      l = {Real(1) / 3, Real(1) / 3, Real(1) / 3};
+    return answer_from(ws_.faces[g].v, l, F.n, F.d, status, iterations);
+  }
+
+  // The answer EPA falls back on if the iteration that expands face f fails (see
+  // expand()). Kept unevaluated: it is needed only on the rare failure paths, while
+  // building it (witness points, the capped() bracket, two EpaResult copies) every
+  // iteration cost a fifth of EPA's time on boxes. The vertices of f outlive f itself
+  // (EPA never removes vertices), so its barycentric coordinates suffice, unless the
+  // origin's projection falls outside f: then answer_from_face would walk to a
+  // coplanar neighbour through adjacency that this iteration rewrites, so that answer
+  // is built at once. Either way it equals answer_from_face(f) at the time of capture.
+  struct PendingAnswer {
+    bool valid = false;
+    bool built = false;
+    EpaResult built_answer;
+    std::array<int, 3> v{};
+    std::array<Real, 3> l{};
+    Vec3 n = Vec3::UnitX();
+    Real d = 0;
+    QueryStatus status = QueryStatus::kOk;
+    int iterations = 0;
+  };
+
+  PendingAnswer capture(int f, QueryStatus status, int iterations) const {
+    PendingAnswer p;
+    p.valid = true;
+    const EpaFace& F = ws_.faces[f];
+    p.l = barycentric(f, F.d * F.n);
+    if (*std::min_element(p.l.begin(), p.l.end()) < -1e-12) {
+      p.built = true;
+      p.built_answer = answer_from_face(f, status, iterations);
+      return p;
     }
-    const EpaFace& G = ws_.faces[g];
-    EpaResult r;
-    r.status = status;
-    r.depth = std::max(F.d, Real(0));
-    r.normal = F.n;
-    r.point_a = l[0] * ws_.a[G.v[0]] + l[1] * ws_.a[G.v[1]] + l[2] * ws_.a[G.v[2]];
-    r.point_b = l[0] * ws_.b[G.v[0]] + l[1] * ws_.b[G.v[1]] + l[2] * ws_.b[G.v[2]];
-    r.iterations = iterations;
-    return r;
+    p.v = F.v;
+    p.n = F.n;
+    p.d = F.d;
+    p.status = status;
+    p.iterations = iterations;
+    return p;
+  }
+
+  EpaResult lower(const PendingAnswer& p) const {
+    return p.built ? p.built_answer : answer_from(p.v, p.l, p.n, p.d, p.status, p.iterations);
   }
 
   // Answer for a stop before convergence (cap reached, or a polytope that cannot be
@@ -1053,9 +1109,8 @@ class Epa {
 
   EpaResult expand() {
     Real& upper = upper_;  // smallest support distance seen: an upper bound on the depth
-    // Answer of the last face popped, kept by value: the face itself is recycled.
-    EpaResult last;
-    bool have_last = false;
+    // Fallback answer of the last face expanded (see PendingAnswer).
+    PendingAnswer pending;
     const int max_it = std::max(st_.max_iterations, 1);
     for (int it = 0;; ++it) {
       // Closest live face.
@@ -1074,7 +1129,7 @@ class Epa {
       }
       if (f < 0) {
         // Every face pruned or gone: only round-off can do this.
-        return have_last ? last : degenerate_answer();
+        return pending.valid ? capped(lower(pending)) : degenerate_answer();
       }
       if (it >= max_it) return capped(answer_from_face(f, QueryStatus::kMaxIterations, it));
 
@@ -1103,10 +1158,9 @@ class Epa {
         return capped(answer_from_face(f, QueryStatus::kMaxIterations, it));
       const QueryStatus stuck = dw - d <= kEpaResolutionRel * scale_ ? QueryStatus::kOk
                                                                         : QueryStatus::kDegenerate;
-      const EpaResult lower_answer = answer_from_face(f, stuck, it);
-      const EpaResult fallback = capped(lower_answer);
-      last = fallback;
-      have_last = true;
+      pending = capture(f, stuck, it);
+      // Every early return below answers with face f's bracket [d, dw] (capped()).
+      auto fallback = [&] { return capped(lower(pending)); };
       const int wi = push_vertex(w, pa, pb);
 
       // Silhouette (van den Bergen 2001): depth-first walk from f over the faces that
@@ -1142,7 +1196,7 @@ class Epa {
 
       // One new face per horizon edge, fanned around w.
       const int h = static_cast<int>(ws_.horizon.size());
-      if (h < 3) return fallback;
+      if (h < 3) return fallback();
       for (int k = 0; k < h; ++k) {
         const auto [g, e] = ws_.horizon[k];
         const EpaFace& G = ws_.faces[g];
@@ -1150,8 +1204,8 @@ class Epa {
         bool sliver;
         const int nf = new_face(p, q, wi, sliver);
         if (nf < 0) {
-          if (sliver) return fallback;
-          EpaResult r = lower_answer;  // face pool full
+          if (sliver) return fallback();
+          EpaResult r = lower(pending);  // face pool full
           r.status = QueryStatus::kMaxIterations;
           return capped(r);
         }
@@ -1162,7 +1216,7 @@ class Epa {
         // a curved support (cylinder rims): the polytope is no longer convex, and
         // expanding it further pops faces with negative distance (depth 0 answers)
         // and cycles. Stop with the popped face, whose bracket [d, dw] is still valid.
-        if (ws_.faces[nf].d < d - flat_tol()) return fallback;
+        if (ws_.faces[nf].d < d - flat_tol()) return fallback();
         link(nf, 0, g, e);
         ws_.created.push_back(nf);
       }
@@ -1175,7 +1229,7 @@ class Epa {
           const int c = (k + 1 + j) % h;  // the walk order makes c = k + 1 the usual hit
           if (ws_.faces[ws_.created[c]].v[0] == q) match = ws_.created[c];
         }
-        if (match < 0) return fallback;
+        if (match < 0) return fallback();
         link(fk, 1, match, 2);
       }
       for (int k = 0; k < h; ++k) heap_push(ws_.created[k], upper);
