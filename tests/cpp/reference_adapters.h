@@ -168,9 +168,12 @@ inline RefResult fcl_distance(const FclObject& a, const FclObject& b) {
 }
 
 /// FCL collision with contacts (up to 4, like a WMO manifold): the deepest contact's
-/// depth and normal (FCL 0.7's contact normal points from o1 to o2).
-inline RefResult fcl_collide_depth(const FclObject& a, const FclObject& b) {
+/// depth and normal (FCL 0.7's contact normal points from o1 to o2). `gjk_tolerance`
+/// is FCL's CollisionRequest::gjk_tolerance (its default 1e-6); it has no effect on
+/// the pairs FCL answers with its own special routines.
+inline RefResult fcl_collide_depth(const FclObject& a, const FclObject& b, double gjk_tolerance = 1e-6) {
   fcl::CollisionRequestd req(4, true);
+  req.gjk_tolerance = gjk_tolerance;
   fcl::CollisionResultd res;
   fcl::collide(a.object.get(), b.object.get(), req, res);
   RefResult r;
