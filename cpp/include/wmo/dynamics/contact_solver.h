@@ -1,0 +1,91 @@
+// WMO dynamics layer: the contact solver.
+//
+// Soft step (Catto, "Solver2D" 2024 and Box2D v3's solver.c / contact_solver.c): the
+// step is split into substeps; each substep integrates velocities, warm starts, solves
+// the contacts with a soft position bias (a spring-damper of `contact_hertz`, damping
+// ratio `damping_ratio`, capped at `push_max` m/s), integrates positions, then relaxes
+// (solves again without the bias, so the bias's velocity is not kept as energy).
+// Restitution is applied once after the substeps. Anchors stay fixed within the step
+// and the current separation is updated from the bodies' position and rotation deltas,
+// so contacts need not be recomputed per substep.
+//
+// Rows per contact point: one normal row (non-negative impulse) and two friction rows
+// whose combined impulse is clamped to the Coulomb cone |lambda_t| <= mu lambda_n. A
+// manifold with zero friction builds no friction rows (ContactConstraint::friction == 0
+// skips them in every pass).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "wmo/math.h"
+
+namespace wmo {
+
+/// Per-body solver state: what the inner loops read and write (hot data).
+struct BodyState {
+  Vec3 v = Vec3::Zero();   ///< linear velocity of the COM, m/s, world
+  Vec3 w = Vec3::Zero();   ///< angular velocity, rad/s, world
+  Vec3 dp = Vec3::Zero();  ///< COM displacement since the step began, m, world
+  Quat dq = Quat::Identity();  ///< rotation since the step began (world frame)
+  Real inv_mass = 0;           ///< 1/kg; 0 for static and kinematic bodies
+  Mat3 inv_inertia = Mat3::Zero();  ///< world-space inverse inertia at the step's start
+};
+
+/// Spring-damper coefficients of a soft constraint for one substep (Box2D v3 b2Softness).
+struct Softness {
+  Real bias_rate = 0;      ///< 1/s: bias velocity per metre of penetration
+  Real mass_scale = 1;     ///< scales the effective mass
+  Real impulse_scale = 0;  ///< fraction of the accumulated impulse removed each pass
+};
+
+/// Softness for a spring of `hertz` (Hz) and `damping_ratio` over a substep of h seconds.
+Softness make_softness(Real hertz, Real damping_ratio, Real h);
+
+struct ContactConstraintPoint {
+  Vec3 ra = Vec3::Zero();  ///< anchor on A relative to A's COM at the step's start, m, world
+  Vec3 rb = Vec3::Zero();  ///< anchor on B relative to B's COM, m, world
+  /// Separation at the step's start minus n.(rb - ra) (m), so that the current
+  /// separation is adjusted_separation + n.((dp_b + dq_b rb) - (dp_a + dq_a ra)).
+  Real adjusted_separation = 0;
+  Real normal_mass = 0;               ///< 1 / (effective mass along n), kg
+  std::array<Real, 2> tangent_mass{};  ///< same along the two tangents
+  Real normal_impulse = 0;            ///< accumulated, N s (warm-started)
+  std::array<Real, 2> tangent_impulse{};
+  Real max_normal_impulse = 0;        ///< largest normal impulse this step (restitution)
+  Real relative_velocity = 0;         ///< normal relative velocity at the step's start, m/s
+  std::uint32_t feature_id = 0;
+};
+
+struct ContactConstraint {
+  int body_a = 0, body_b = 0;  ///< indices into the BodyState array
+  Vec3 normal = Vec3::UnitY();  ///< from A to B, world
+  Vec3 tangent1 = Vec3::UnitX(), tangent2 = Vec3::UnitZ();
+  Real friction = 0;
+  Real restitution = 0;
+  int count = 0;
+  std::array<ContactConstraintPoint, 4> points{};
+};
+
+struct SolverSettings {
+  Real contact_hertz = 60;       ///< Hz, capped at a quarter of the substep rate
+  Real damping_ratio = 10;       ///< of the contact spring (over-damped: no bounce)
+  Real push_max = 3;             ///< m/s, largest bias velocity that resolves overlap
+  Real restitution_threshold = 1;  ///< m/s, slower approaches do not bounce
+};
+
+/// Computes effective masses and softness for `h` (the substep). States must hold
+/// inv_mass / inv_inertia.
+void prepare_contacts(std::vector<ContactConstraint>& cs, const std::vector<BodyState>& states,
+                      const SolverSettings& s, Real h, Softness& soft);
+/// Applies the accumulated (warm-start) impulses.
+void warm_start_contacts(std::vector<ContactConstraint>& cs, std::vector<BodyState>& states);
+/// One Gauss-Seidel pass over every contact; `use_bias` adds the soft position bias.
+void solve_contacts(std::vector<ContactConstraint>& cs, std::vector<BodyState>& states,
+                    const Softness& soft, Real inv_h, Real push_max, bool use_bias);
+/// Restitution pass after the substeps (Box2D v3 b2ApplyRestitution).
+void apply_restitution(std::vector<ContactConstraint>& cs, std::vector<BodyState>& states,
+                       Real threshold);
+
+}  // namespace wmo

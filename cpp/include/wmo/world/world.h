@@ -1,0 +1,221 @@
+// WMO world layer: bodies reached by handles, the step as named stages, and its profile.
+//
+// Storage: body state lives in dense structure-of-arrays (positions, orientations,
+// linear and angular velocities), one row per body in insertion order; removing a body
+// moves the last body into its row (swap-remove), so dense indices change only on
+// removal. A BodyId {slot, generation} stays valid until its body is removed; using it
+// afterwards throws InvalidArgument (never undefined behaviour).
+//
+// The step (World::step), each stage timed into the profile:
+//   update_broadphase  move the proxies of bodies that can move (fattened AABBs)
+//   find_pairs         overlapping proxy pairs (deterministic order)
+//   narrowphase        contact manifolds (wmo::collide) with a speculative margin,
+//                      matched to last step's points by feature id (warm starting)
+//   solve              soft step: per substep integrate_velocities, warm start, solve,
+//                      integrate_positions, relax (contact_solver.h); with no contacts
+//                      only the integration runs
+//   restitution        skipped when no contact has restitution
+//   store_impulses     impulses kept for the next step's warm start
+// Units: metres, kilograms, seconds, radians; +y is not special (gravity is a vector).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "wmo/collision/broadphase.h"
+#include "wmo/collision/narrowphase.h"
+#include "wmo/dynamics/body.h"
+#include "wmo/dynamics/contact_solver.h"
+
+namespace wmo {
+
+/// How a pair's friction or restitution is formed from the two bodies' values.
+enum class CombineRule : std::uint8_t {
+  kMultiply = 0,       ///< a * b (Bullet's friction rule)
+  kGeometricMean = 1,  ///< sqrt(a * b) (Box2D's friction rule)
+  kMax = 2,            ///< max(a, b) (Box2D's restitution rule, MuJoCo's friction)
+  kMin = 3,
+  kAverage = 4,        ///< (a + b) / 2 (PhysX's default)
+};
+CombineRule combine_rule_from_string(const std::string& s);
+const char* to_string(CombineRule r);
+Real combine(CombineRule rule, Real a, Real b);
+
+struct WorldSettings {
+  Vec3 gravity = Vec3(0, -9.81, 0);  ///< unit: m/s^2, world frame
+  Real dt = 1.0 / 60;                ///< unit: s, one step
+  /// Substeps per step (soft step): more substeps make contacts stiffer and stacks
+  /// steadier at a proportional cost.
+  int substeps = 4;
+  /// Velocity iterations (Gauss-Seidel passes with bias) per substep.
+  int iterations = 1;
+  /// Relax passes (without bias) per substep.
+  int relax_iterations = 1;
+  SolverSettings solver{};
+  /// Speculative margin (unit: m): contacts are created for pairs closer than this, so
+  /// bodies approaching by up to margin / dt m/s are stopped without tunnelling-free
+  /// guarantees beyond it (CCD is a later feature).
+  Real speculative_distance = 0.04;
+  /// Broadphase fattening (unit: m): a body moves its proxy only when its box leaves
+  /// the box fattened by this much.
+  Real aabb_margin = 0.1;
+  CombineRule friction_combine = CombineRule::kMultiply;
+  CombineRule restitution_combine = CombineRule::kMax;
+  /// Gyroscopic term w x (I w) for dynamic bodies, integrated implicitly (one Newton
+  /// step, Catto GDC 2015), so a spinning body keeps its angular momentum. Off by
+  /// default, as in Box2D and Bullet.
+  bool gyroscopic = false;
+  BroadphaseType broadphase = BroadphaseType::kAabbTree;
+};
+
+/// Checks every setting and throws InvalidArgument naming the first bad one.
+void validate_world_settings(const WorldSettings& s);
+
+/// Handle of a body: `slot` indexes the world's handle table; `generation` changes when
+/// the slot is reused, so a handle to a removed body is detected.
+struct BodyId {
+  std::int32_t slot = -1;
+  std::uint32_t generation = 0;
+  bool operator==(const BodyId&) const = default;
+};
+
+/// Time and work of one stage.
+struct StageProfile {
+  double seconds = 0;  ///< wall time of the stage in the last step
+  long long count = 0;  ///< work items of the stage in the last step (see World::profile)
+  double total_seconds = 0;  ///< accumulated over every step since the world was made
+  long long total_count = 0;
+  long long runs = 0;  ///< steps in which the stage did any work
+};
+
+/// Names of the step's stages, in order.
+inline constexpr std::array<const char*, 6> kStageNames = {
+    "update_broadphase", "find_pairs", "narrowphase", "solve", "restitution", "store_impulses"};
+
+/// One contact point as World::contacts reports it (world frame).
+struct ContactInfo {
+  int body_a = 0, body_b = 0;  ///< dense body indices
+  Vec3 point = Vec3::Zero();   ///< midpoint of the two surface points, m
+  Vec3 normal = Vec3::UnitY();  ///< from A to B
+  Real depth = 0;              ///< > 0 overlapping, m
+  Real normal_impulse = 0;     ///< N s, over the last step
+};
+
+class World {
+ public:
+  explicit World(const WorldSettings& settings = {});
+
+  const WorldSettings& settings() const { return settings_; }
+  /// Replaces the settings (validated first; the world is unchanged on error).
+  void set_settings(const WorldSettings& s);
+
+  /// Adds a body; validates `def` first (the world is unchanged on error).
+  BodyId add_body(const BodyDef& def);
+  /// Removes a body; its handle becomes stale. The last body takes its dense row.
+  void remove_body(BodyId id);
+  bool is_valid(BodyId id) const;
+  /// Dense row of a body (changes when another body is removed). Throws if stale.
+  int index_of(BodyId id) const;
+  /// Handle of the body in dense row `index`.
+  BodyId id_at(int index) const;
+  int body_count() const { return static_cast<int>(positions_.size()); }
+
+  /// Advances the world by n steps of settings().dt.
+  void step(int n = 1);
+
+  // ---- State (structure of arrays, one row per body, dense order). Writable: the
+  // next step reads what the user wrote (velocities of static bodies are ignored). ----
+  std::vector<Vec3>& positions() { return positions_; }        ///< shape origin, m
+  std::vector<Quat>& orientations() { return orientations_; }  ///< (x, y, z, w) in memory
+  std::vector<Vec3>& linear_velocities() { return linear_velocities_; }    ///< COM, m/s
+  std::vector<Vec3>& angular_velocities() { return angular_velocities_; }  ///< rad/s
+  const std::vector<Vec3>& positions() const { return positions_; }
+  const std::vector<Quat>& orientations() const { return orientations_; }
+  const std::vector<Vec3>& linear_velocities() const { return linear_velocities_; }
+  const std::vector<Vec3>& angular_velocities() const { return angular_velocities_; }
+
+  BodyKind kind(int index) const { return kinds_[index]; }
+  const BodyMass& mass(int index) const { return masses_[index]; }
+  const Shape& shape(int index) const { return *shapes_[index]; }
+  Real friction(int index) const { return frictions_[index]; }
+  Real restitution(int index) const { return restitutions_[index]; }
+
+  /// Applies an impulse (N s, world) at a world point (m) to a dynamic body; other
+  /// kinds ignore it. Applies a force / torque for the next step only.
+  void apply_impulse(BodyId id, const Vec3& impulse, const Vec3& world_point);
+  void apply_force(BodyId id, const Vec3& force, const Vec3& world_point);
+  void apply_torque(BodyId id, const Vec3& torque);
+
+  /// Contact points of the last step (after the solve).
+  std::vector<ContactInfo> contacts() const;
+  int contact_point_count() const;
+  /// Largest penetration depth among the last step's contact points (m), 0 if none.
+  Real max_penetration() const;
+
+  /// Per-stage profile of the last step (and accumulated), in kStageNames order.
+  /// Counts: update_broadphase = moved bodies, find_pairs = candidate pairs,
+  /// narrowphase = touching manifolds, solve = contact points, restitution = bouncing
+  /// contacts, store_impulses = contact points.
+  const std::array<StageProfile, kStageNames.size()>& profile() const { return profile_; }
+  long long step_count() const { return step_count_; }
+
+  /// Kinetic energy sum 1/2 m v^2 + 1/2 w.I w over dynamic bodies (J).
+  Real kinetic_energy() const;
+
+ private:
+  struct Slot {
+    std::int32_t index = -1;  // dense row, -1 when free
+    std::uint32_t generation = 0;
+  };
+  struct CachedPoint {
+    std::uint32_t feature_id;
+    Real normal_impulse;
+    std::array<Real, 2> tangent_impulse;
+  };
+  struct CachedManifold {
+    int count = 0;
+    std::array<CachedPoint, 4> points{};
+  };
+
+  int require(BodyId id, const char* what) const;
+  Vec3 world_com(int i) const { return positions_[i] + orientations_[i] * masses_[i].local_com; }
+  void integrate_velocities(Real h);
+  void integrate_positions(Real h);
+  void run_step();
+
+  WorldSettings settings_;
+  std::unique_ptr<Broadphase> broadphase_;
+
+  // Dense per-body arrays.
+  std::vector<Vec3> positions_;
+  std::vector<Quat> orientations_;
+  std::vector<Vec3> linear_velocities_;
+  std::vector<Vec3> angular_velocities_;
+  std::vector<BodyKind> kinds_;
+  std::vector<BodyMass> masses_;
+  std::vector<std::shared_ptr<const Shape>> shapes_;
+  std::vector<Real> frictions_, restitutions_, linear_damping_, angular_damping_, gravity_scale_;
+  std::vector<Vec3> forces_, torques_;
+  std::vector<ProxyId> proxies_;
+  std::vector<std::int32_t> slot_of_;  // dense row -> slot
+
+  std::vector<Slot> slots_;
+  std::vector<std::int32_t> free_slots_;
+
+  // Step scratch and contact cache.
+  std::vector<ProxyPair> pairs_;
+  std::vector<Manifold> manifolds_scratch_;
+  std::vector<BodyState> states_;
+  std::vector<ContactConstraint> constraints_;
+  std::vector<std::uint64_t> constraint_keys_;
+  std::unordered_map<std::uint64_t, CachedManifold> cache_;
+
+  std::array<StageProfile, kStageNames.size()> profile_{};
+  long long step_count_ = 0;
+};
+
+}  // namespace wmo

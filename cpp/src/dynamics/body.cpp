@@ -1,0 +1,74 @@
+// Body definitions: validation and mass properties.
+#include "wmo/dynamics/body.h"
+
+#include <cmath>
+#include <sstream>
+#include <string>
+
+namespace wmo {
+
+BodyKind body_kind_from_string(const std::string& s) {
+  if (s == "static") return BodyKind::kStatic;
+  if (s == "kinematic") return BodyKind::kKinematic;
+  if (s == "dynamic") return BodyKind::kDynamic;
+  throw InvalidArgument("kind must be 'static', 'kinematic' or 'dynamic', got '" + s + "'");
+}
+
+const char* to_string(BodyKind k) {
+  switch (k) {
+    case BodyKind::kStatic:
+      return "static";
+    case BodyKind::kKinematic:
+      return "kinematic";
+    case BodyKind::kDynamic:
+      return "dynamic";
+  }
+  return "?";
+}
+
+namespace {
+std::string num(Real v) {
+  std::ostringstream o;
+  o << v;
+  return o.str();
+}
+}  // namespace
+
+void validate_body_def(const BodyDef& d) {
+  if (!d.shape) throw InvalidArgument("shape must be a shape, got None");
+  require_finite("position", d.position);
+  const Real qn = d.orientation.norm();
+  if (!d.orientation.coeffs().allFinite() || std::abs(qn - 1) > kUnitQuatTolerance)
+    throw InvalidArgument("orientation must be a unit quaternion (x, y, z, w), got norm " + num(qn));
+  require_finite("linear_velocity", d.linear_velocity);
+  require_finite("angular_velocity", d.angular_velocity);
+  require_positive("density", d.density);
+  if (!std::isnan(d.mass)) require_positive("mass", d.mass);
+  require_non_negative("friction", d.friction);
+  if (!(d.restitution >= 0 && d.restitution <= 1))
+    throw InvalidArgument("restitution must be in [0, 1], got " + num(d.restitution));
+  require_non_negative("linear_damping", d.linear_damping);
+  require_non_negative("angular_damping", d.angular_damping);
+  if (!std::isfinite(d.gravity_scale)) throw InvalidArgument("gravity_scale must be finite, got " + num(d.gravity_scale));
+  if (d.kind == BodyKind::kDynamic && !d.shape->is_solid())
+    throw InvalidArgument(std::string("kind 'dynamic' needs a solid shape, got a ") + to_string(d.shape->type()) +
+                          " (use kind='static' or 'kinematic')");
+}
+
+BodyMass compute_body_mass(const BodyDef& def) {
+  BodyMass m;
+  if (def.kind != BodyKind::kDynamic) return m;
+  const MassProperties mp = def.shape->mass_properties(def.density);
+  Real scale = 1;
+  if (!std::isnan(def.mass)) scale = def.mass / mp.mass;
+  m.mass = mp.mass * scale;
+  m.inv_mass = 1 / m.mass;
+  m.local_com = mp.center_of_mass;
+  m.inertia_local = mp.inertia * scale;
+  m.inv_inertia_local = m.inertia_local.inverse();
+  if (!m.inv_inertia_local.allFinite() || !std::isfinite(m.inv_mass))
+    throw InvalidArgument("mass properties of the shape are degenerate (mass " + num(m.mass) + ")");
+  return m;
+}
+
+}  // namespace wmo

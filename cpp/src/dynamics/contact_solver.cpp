@@ -1,0 +1,148 @@
+// Soft-step contact solver (see contact_solver.h; Catto 2024 "Solver2D", Box2D v3).
+#include "wmo/dynamics/contact_solver.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace wmo {
+
+Softness make_softness(Real hertz, Real damping_ratio, Real h) {
+  Softness s;
+  if (hertz <= 0) return s;  // rigid: no bias, full mass, no impulse decay
+  const Real omega = 2 * kPi * hertz;
+  const Real a1 = 2 * damping_ratio + h * omega;
+  const Real a2 = h * omega * a1;
+  const Real a3 = 1 / (1 + a2);
+  s.bias_rate = omega / a1;
+  s.mass_scale = a2 * a3;
+  s.impulse_scale = a3;
+  return s;
+}
+
+namespace {
+
+inline Real effective_mass(const BodyState& a, const BodyState& b, const Vec3& ra, const Vec3& rb,
+                           const Vec3& dir) {
+  const Vec3 ca = ra.cross(dir), cb = rb.cross(dir);
+  const Real k = a.inv_mass + b.inv_mass + ca.dot(a.inv_inertia * ca) + cb.dot(b.inv_inertia * cb);
+  return k > 0 ? 1 / k : 0;
+}
+
+inline void apply(BodyState& a, BodyState& b, const Vec3& ra, const Vec3& rb, const Vec3& p) {
+  a.v -= a.inv_mass * p;
+  a.w -= a.inv_inertia * ra.cross(p);
+  b.v += b.inv_mass * p;
+  b.w += b.inv_inertia * rb.cross(p);
+}
+
+inline Vec3 relative_velocity(const BodyState& a, const BodyState& b, const Vec3& ra, const Vec3& rb) {
+  return (b.v + b.w.cross(rb)) - (a.v + a.w.cross(ra));
+}
+
+}  // namespace
+
+void prepare_contacts(std::vector<ContactConstraint>& cs, const std::vector<BodyState>& states,
+                      const SolverSettings& s, Real h, Softness& soft) {
+  // Stiffer than a quarter of the substep rate and the spring is under-resolved by the
+  // integrator (Box2D v3 caps contact_hertz the same way).
+  const Real hertz = std::min(s.contact_hertz, 0.25 / h);
+  soft = make_softness(hertz, s.damping_ratio, h);
+  for (ContactConstraint& c : cs) {
+    const BodyState& a = states[c.body_a];
+    const BodyState& b = states[c.body_b];
+    orthonormal_basis(c.normal, c.tangent1, c.tangent2);
+    for (int i = 0; i < c.count; ++i) {
+      ContactConstraintPoint& p = c.points[i];
+      p.normal_mass = effective_mass(a, b, p.ra, p.rb, c.normal);
+      p.tangent_mass[0] = effective_mass(a, b, p.ra, p.rb, c.tangent1);
+      p.tangent_mass[1] = effective_mass(a, b, p.ra, p.rb, c.tangent2);
+      p.relative_velocity = c.normal.dot(relative_velocity(a, b, p.ra, p.rb));
+      p.max_normal_impulse = 0;
+    }
+  }
+}
+
+void warm_start_contacts(std::vector<ContactConstraint>& cs, std::vector<BodyState>& states) {
+  for (ContactConstraint& c : cs) {
+    BodyState& a = states[c.body_a];
+    BodyState& b = states[c.body_b];
+    for (int i = 0; i < c.count; ++i) {
+      const ContactConstraintPoint& p = c.points[i];
+      const Vec3 imp = p.normal_impulse * c.normal + p.tangent_impulse[0] * c.tangent1 +
+                       p.tangent_impulse[1] * c.tangent2;
+      apply(a, b, p.ra, p.rb, imp);
+    }
+  }
+}
+
+void solve_contacts(std::vector<ContactConstraint>& cs, std::vector<BodyState>& states,
+                    const Softness& soft, Real inv_h, Real push_max, bool use_bias) {
+  for (ContactConstraint& c : cs) {
+    BodyState& a = states[c.body_a];
+    BodyState& b = states[c.body_b];
+    const Vec3& n = c.normal;
+    for (int i = 0; i < c.count; ++i) {
+      ContactConstraintPoint& p = c.points[i];
+      // Current separation from the bodies' motion since the step began (anchors
+      // rotated by the rotation deltas), as in Box2D v3.
+      const Vec3 d = (b.dp + b.dq * p.rb) - (a.dp + a.dq * p.ra);
+      const Real s = n.dot(d) + p.adjusted_separation;
+      Real bias = 0, mass_scale = 1, impulse_scale = 0;
+      if (s > 0) {
+        bias = s * inv_h;  // speculative: allow the gap to close within this substep
+      } else if (use_bias) {
+        bias = std::max(soft.bias_rate * s, -push_max);
+        mass_scale = soft.mass_scale;
+        impulse_scale = soft.impulse_scale;
+      }
+      const Real vn = n.dot(relative_velocity(a, b, p.ra, p.rb));
+      Real impulse = -p.normal_mass * mass_scale * (vn + bias) - impulse_scale * p.normal_impulse;
+      const Real next = std::max(p.normal_impulse + impulse, Real(0));
+      impulse = next - p.normal_impulse;
+      p.normal_impulse = next;
+      p.max_normal_impulse = std::max(p.max_normal_impulse, impulse);
+      apply(a, b, p.ra, p.rb, impulse * n);
+    }
+    if (c.friction == 0) continue;
+    for (int i = 0; i < c.count; ++i) {
+      ContactConstraintPoint& p = c.points[i];
+      const Vec3 dv = relative_velocity(a, b, p.ra, p.rb);
+      Real t0 = p.tangent_impulse[0] - p.tangent_mass[0] * c.tangent1.dot(dv);
+      Real t1 = p.tangent_impulse[1] - p.tangent_mass[1] * c.tangent2.dot(dv);
+      // Coulomb cone: scale the tangential impulse back onto the circle of radius mu * lambda_n.
+      const Real limit = c.friction * p.normal_impulse;
+      const Real len2 = t0 * t0 + t1 * t1;
+      if (len2 > limit * limit) {
+        const Real k = len2 > 0 ? limit / std::sqrt(len2) : 0;
+        t0 *= k;
+        t1 *= k;
+      }
+      const Real d0 = t0 - p.tangent_impulse[0], d1 = t1 - p.tangent_impulse[1];
+      p.tangent_impulse = {t0, t1};
+      apply(a, b, p.ra, p.rb, d0 * c.tangent1 + d1 * c.tangent2);
+    }
+  }
+}
+
+void apply_restitution(std::vector<ContactConstraint>& cs, std::vector<BodyState>& states,
+                       Real threshold) {
+  for (ContactConstraint& c : cs) {
+    if (c.restitution == 0) continue;
+    BodyState& a = states[c.body_a];
+    BodyState& b = states[c.body_b];
+    for (int i = 0; i < c.count; ++i) {
+      ContactConstraintPoint& p = c.points[i];
+      // Only points that approached fast enough and actually pushed bounce.
+      if (p.relative_velocity > -threshold || p.max_normal_impulse == 0) continue;
+      const Real vn = c.normal.dot(relative_velocity(a, b, p.ra, p.rb));
+      Real impulse = -p.normal_mass * (vn + c.restitution * p.relative_velocity);
+      const Real next = std::max(p.normal_impulse + impulse, Real(0));
+      impulse = next - p.normal_impulse;
+      p.normal_impulse = next;
+      p.max_normal_impulse = std::max(p.max_normal_impulse, impulse);
+      apply(a, b, p.ra, p.rb, impulse * c.normal);
+    }
+  }
+}
+
+}  // namespace wmo

@@ -1,0 +1,503 @@
+// The world: handles, dense body storage and the step's stages (world.h).
+#include "wmo/world/world.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+namespace wmo {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+enum Stage { kUpdateBroadphase = 0, kFindPairs, kNarrowphase, kSolve, kRestitution, kStoreImpulses };
+
+/// Times one stage into the profile (RAII), with the stage's work count.
+class StageTimer {
+ public:
+  StageTimer(StageProfile& p, long long count = 0) : p_(p), count_(count), t0_(Clock::now()) {}
+  void set_count(long long c) { count_ = c; }
+  ~StageTimer() {
+    const double s = std::chrono::duration<double>(Clock::now() - t0_).count();
+    p_.seconds = s;
+    p_.count = count_;
+    p_.total_seconds += s;
+    p_.total_count += count_;
+    if (count_ > 0) ++p_.runs;
+  }
+
+ private:
+  StageProfile& p_;
+  long long count_;
+  Clock::time_point t0_;
+};
+
+Mat3 skew(const Vec3& v) {
+  Mat3 m;
+  m << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
+  return m;
+}
+
+template <class T>
+void swap_remove(std::vector<T>& v, int i) {
+  v[i] = std::move(v.back());
+  v.pop_back();
+}
+
+}  // namespace
+
+CombineRule combine_rule_from_string(const std::string& s) {
+  if (s == "multiply") return CombineRule::kMultiply;
+  if (s == "geometric_mean") return CombineRule::kGeometricMean;
+  if (s == "max") return CombineRule::kMax;
+  if (s == "min") return CombineRule::kMin;
+  if (s == "average") return CombineRule::kAverage;
+  throw InvalidArgument("combine rule must be one of 'multiply', 'geometric_mean', 'max', 'min', 'average', got '" +
+                        s + "'");
+}
+
+const char* to_string(CombineRule r) {
+  switch (r) {
+    case CombineRule::kMultiply:
+      return "multiply";
+    case CombineRule::kGeometricMean:
+      return "geometric_mean";
+    case CombineRule::kMax:
+      return "max";
+    case CombineRule::kMin:
+      return "min";
+    case CombineRule::kAverage:
+      return "average";
+  }
+  return "?";
+}
+
+Real combine(CombineRule rule, Real a, Real b) {
+  switch (rule) {
+    case CombineRule::kMultiply:
+      return a * b;
+    case CombineRule::kGeometricMean:
+      return std::sqrt(a * b);
+    case CombineRule::kMax:
+      return std::max(a, b);
+    case CombineRule::kMin:
+      return std::min(a, b);
+    case CombineRule::kAverage:
+      return 0.5 * (a + b);
+  }
+  return a * b;
+}
+
+void validate_world_settings(const WorldSettings& s) {
+  require_finite("gravity", s.gravity);
+  require_positive("dt", s.dt);
+  if (s.substeps < 1) throw InvalidArgument("substeps must be >= 1, got " + std::to_string(s.substeps));
+  if (s.iterations < 1) throw InvalidArgument("iterations must be >= 1, got " + std::to_string(s.iterations));
+  if (s.relax_iterations < 0)
+    throw InvalidArgument("relax_iterations must be >= 0, got " + std::to_string(s.relax_iterations));
+  require_non_negative("contact_hertz", s.solver.contact_hertz);
+  require_non_negative("contact_damping_ratio", s.solver.damping_ratio);
+  require_non_negative("contact_push_max", s.solver.push_max);
+  require_non_negative("restitution_threshold", s.solver.restitution_threshold);
+  require_non_negative("speculative_distance", s.speculative_distance);
+  require_non_negative("aabb_margin", s.aabb_margin);
+}
+
+World::World(const WorldSettings& settings) : settings_(settings) {
+  validate_world_settings(settings_);
+  BroadphaseSettings bs;
+  bs.aabb_margin = settings_.aabb_margin;
+  broadphase_ = make_broadphase(settings_.broadphase, bs);
+}
+
+void World::set_settings(const WorldSettings& s) {
+  validate_world_settings(s);
+  if (s.broadphase != settings_.broadphase || s.aabb_margin != settings_.aabb_margin) {
+    // Rebuild the broadphase with the same proxies (ids are reassigned).
+    BroadphaseSettings bs;
+    bs.aabb_margin = s.aabb_margin;
+    auto bp = make_broadphase(s.broadphase, bs);
+    for (int i = 0; i < body_count(); ++i) {
+      const Aabb box = shapes_[i]->world_aabb(Pose(positions_[i], orientations_[i])).fattened(s.speculative_distance);
+      proxies_[i] = bp->create_proxy(box, static_cast<std::uint64_t>(slot_of_[i]));
+    }
+    broadphase_ = std::move(bp);
+  }
+  settings_ = s;
+}
+
+int World::require(BodyId id, const char* what) const {
+  if (id.slot < 0 || id.slot >= static_cast<int>(slots_.size()) || slots_[id.slot].index < 0 ||
+      slots_[id.slot].generation != id.generation)
+    throw InvalidArgument(std::string(what) + ": body handle (slot " + std::to_string(id.slot) + ", generation " +
+                          std::to_string(id.generation) + ") is stale or invalid");
+  return slots_[id.slot].index;
+}
+
+bool World::is_valid(BodyId id) const {
+  return id.slot >= 0 && id.slot < static_cast<int>(slots_.size()) && slots_[id.slot].index >= 0 &&
+         slots_[id.slot].generation == id.generation;
+}
+
+int World::index_of(BodyId id) const { return require(id, "index_of"); }
+
+BodyId World::id_at(int index) const {
+  if (index < 0 || index >= body_count())
+    throw InvalidArgument("index must be in [0, " + std::to_string(body_count()) + "), got " + std::to_string(index));
+  const int slot = slot_of_[index];
+  return BodyId{slot, slots_[slot].generation};
+}
+
+BodyId World::add_body(const BodyDef& def) {
+  validate_body_def(def);
+  const BodyMass m = compute_body_mass(def);  // may throw: nothing changed yet
+  Quat q = def.orientation;
+  q.normalize();
+  const Aabb box = def.shape->world_aabb(Pose(def.position, q)).fattened(settings_.speculative_distance);
+
+  int slot;
+  if (!free_slots_.empty()) {
+    slot = free_slots_.back();
+    free_slots_.pop_back();
+  } else {
+    slot = static_cast<int>(slots_.size());
+    slots_.push_back(Slot{});
+  }
+  const int index = body_count();
+  slots_[slot].index = index;
+  const ProxyId proxy = broadphase_->create_proxy(box, static_cast<std::uint64_t>(slot));
+
+  positions_.push_back(def.position);
+  orientations_.push_back(q);
+  const bool moving = def.kind != BodyKind::kStatic;
+  linear_velocities_.push_back(moving ? def.linear_velocity : Vec3::Zero());
+  angular_velocities_.push_back(moving ? def.angular_velocity : Vec3::Zero());
+  kinds_.push_back(def.kind);
+  masses_.push_back(m);
+  shapes_.push_back(def.shape);
+  frictions_.push_back(def.friction);
+  restitutions_.push_back(def.restitution);
+  linear_damping_.push_back(def.linear_damping);
+  angular_damping_.push_back(def.angular_damping);
+  gravity_scale_.push_back(def.gravity_scale);
+  forces_.push_back(Vec3::Zero());
+  torques_.push_back(Vec3::Zero());
+  proxies_.push_back(proxy);
+  slot_of_.push_back(slot);
+  // Dense indices of the last step's constraints stay valid (the new row is at the end).
+  return BodyId{slot, slots_[slot].generation};
+}
+
+void World::remove_body(BodyId id) {
+  const int i = require(id, "remove_body");
+  broadphase_->destroy_proxy(proxies_[i]);
+  // Forget cached contacts of this slot: a later body in the same slot must not inherit
+  // its impulses.
+  const auto slot = static_cast<std::uint64_t>(id.slot);
+  for (auto it = cache_.begin(); it != cache_.end();) {
+    const std::uint64_t a = it->first >> 40, b = (it->first >> 16) & 0xFFFFFF;
+    it = (a == slot || b == slot) ? cache_.erase(it) : std::next(it);
+  }
+  const int last = body_count() - 1;
+  if (i != last) slots_[slot_of_[last]].index = i;
+  swap_remove(positions_, i);
+  swap_remove(orientations_, i);
+  swap_remove(linear_velocities_, i);
+  swap_remove(angular_velocities_, i);
+  swap_remove(kinds_, i);
+  swap_remove(masses_, i);
+  swap_remove(shapes_, i);
+  swap_remove(frictions_, i);
+  swap_remove(restitutions_, i);
+  swap_remove(linear_damping_, i);
+  swap_remove(angular_damping_, i);
+  swap_remove(gravity_scale_, i);
+  swap_remove(forces_, i);
+  swap_remove(torques_, i);
+  swap_remove(proxies_, i);
+  swap_remove(slot_of_, i);
+  slots_[id.slot].index = -1;
+  ++slots_[id.slot].generation;
+  free_slots_.push_back(id.slot);
+  // The last step's constraints refer to dense rows that moved.
+  constraints_.clear();
+  states_.clear();
+}
+
+void World::apply_impulse(BodyId id, const Vec3& impulse, const Vec3& world_point) {
+  const int i = require(id, "apply_impulse");
+  require_finite("impulse", impulse);
+  require_finite("point", world_point);
+  if (kinds_[i] != BodyKind::kDynamic) return;
+  const BodyMass& m = masses_[i];
+  linear_velocities_[i] += m.inv_mass * impulse;
+  const Mat3 inv_i = world_inv_inertia(orientations_[i], m.inv_inertia_local);
+  angular_velocities_[i] += inv_i * (world_point - world_com(i)).cross(impulse);
+}
+
+void World::apply_force(BodyId id, const Vec3& force, const Vec3& world_point) {
+  const int i = require(id, "apply_force");
+  require_finite("force", force);
+  require_finite("point", world_point);
+  if (kinds_[i] != BodyKind::kDynamic) return;
+  forces_[i] += force;
+  torques_[i] += (world_point - world_com(i)).cross(force);
+}
+
+void World::apply_torque(BodyId id, const Vec3& torque) {
+  const int i = require(id, "apply_torque");
+  require_finite("torque", torque);
+  if (kinds_[i] != BodyKind::kDynamic) return;
+  torques_[i] += torque;
+}
+
+void World::step(int n) {
+  if (n < 0) throw InvalidArgument("n must be >= 0, got " + std::to_string(n));
+  for (int k = 0; k < n; ++k) run_step();
+}
+
+void World::integrate_velocities(Real h) {
+  const int n = body_count();
+  for (int i = 0; i < n; ++i) {
+    if (kinds_[i] != BodyKind::kDynamic) continue;
+    BodyState& s = states_[i];
+    const BodyMass& m = masses_[i];
+    Vec3 v = s.v + h * (gravity_scale_[i] * settings_.gravity + m.inv_mass * forces_[i]);
+    Vec3 w = s.w + h * (s.inv_inertia * torques_[i]);
+    if (settings_.gyroscopic) {
+      // Implicit gyroscopic term (Catto, "Numerical Methods", GDC 2015): one Newton
+      // step on I (w2 - w1) + h w2 x I w2 = 0 in body coordinates.
+      const Quat q = s.dq * orientations_[i];
+      const Mat3 r = q.toRotationMatrix();
+      const Vec3 wb = r.transpose() * w;
+      const Mat3& ib = m.inertia_local;
+      const Vec3 iw = ib * wb;
+      const Vec3 f = h * wb.cross(iw);
+      const Mat3 jac = ib + h * (skew(wb) * ib - skew(iw));
+      w = r * (wb - jac.partialPivLu().solve(f));
+    }
+    // Damping in the implicit form of Box2D and Jolt: stable for any h * damping.
+    v *= 1 / (1 + h * linear_damping_[i]);
+    w *= 1 / (1 + h * angular_damping_[i]);
+    s.v = v;
+    s.w = w;
+  }
+}
+
+void World::integrate_positions(Real h) {
+  const int n = body_count();
+  for (int i = 0; i < n; ++i) {
+    if (kinds_[i] == BodyKind::kStatic) continue;
+    BodyState& s = states_[i];
+    const Vec3& lc = masses_[i].local_com;
+    const Vec3 com = positions_[i] + orientations_[i] * lc + h * s.v;
+    const Quat q = integrate_rotation(orientations_[i], s.w, h);
+    orientations_[i] = q;
+    positions_[i] = com - q * lc;
+    s.dp += h * s.v;
+    s.dq = integrate_rotation(s.dq, s.w, h);
+  }
+}
+
+void World::run_step() {
+  const int n = body_count();
+  const Real dt = settings_.dt;
+  const Real spec = settings_.speculative_distance;
+
+  // ---- update_broadphase: proxies of bodies that can move. ----
+  {
+    long long moved = 0;
+    StageTimer t(profile_[kUpdateBroadphase]);
+    for (int i = 0; i < n; ++i) {
+      if (kinds_[i] == BodyKind::kStatic) continue;
+      const Aabb box = shapes_[i]->world_aabb(Pose(positions_[i], orientations_[i])).fattened(spec);
+      broadphase_->move_proxy(proxies_[i], box, dt * linear_velocities_[i]);
+      ++moved;
+    }
+    t.set_count(moved);
+  }
+
+  // ---- find_pairs ----
+  {
+    StageTimer t(profile_[kFindPairs]);
+    broadphase_->update();
+    pairs_.clear();
+    broadphase_->query_pairs(pairs_);
+    t.set_count(static_cast<long long>(pairs_.size()));
+  }
+
+  // ---- narrowphase: manifolds, matched to the cache by feature id. ----
+  constraints_.clear();
+  constraint_keys_.clear();
+  {
+    StageTimer t(profile_[kNarrowphase]);
+    CollideSettings cs;
+    cs.margin = spec;
+    for (const ProxyPair& pp : pairs_) {
+      int sa = static_cast<int>(broadphase_->user_data(pp.first));
+      int sb = static_cast<int>(broadphase_->user_data(pp.second));
+      if (sa > sb) std::swap(sa, sb);  // the pair's order is its slots' order
+      const int a = slots_[sa].index, b = slots_[sb].index;
+      if (kinds_[a] != BodyKind::kDynamic && kinds_[b] != BodyKind::kDynamic) continue;
+      manifolds_scratch_.clear();
+      collide(*shapes_[a], Pose(positions_[a], orientations_[a]), *shapes_[b], Pose(positions_[b], orientations_[b]),
+              manifolds_scratch_, cs);
+      if (manifolds_scratch_.empty()) continue;
+      const Vec3 com_a = world_com(a), com_b = world_com(b);
+      const Real mu = combine(settings_.friction_combine, frictions_[a], frictions_[b]);
+      const Real e = combine(settings_.restitution_combine, restitutions_[a], restitutions_[b]);
+      for (const Manifold& m : manifolds_scratch_) {
+        if (m.count == 0) continue;
+        // Key: slots (24 bits each) and the composite children (16 bits, wrapped).
+        const std::uint64_t key = (static_cast<std::uint64_t>(sa) << 40) | (static_cast<std::uint64_t>(sb) << 16) |
+                                  ((static_cast<std::uint64_t>(m.child_a) & 0xFF) << 8) |
+                                  (static_cast<std::uint64_t>(m.child_b) & 0xFF);
+        const auto cached = cache_.find(key);
+        ContactConstraint c;
+        c.body_a = a;
+        c.body_b = b;
+        c.normal = m.normal;
+        c.friction = mu;
+        c.restitution = e;
+        c.count = m.count;
+        for (int k = 0; k < m.count; ++k) {
+          const ContactPoint& cp = m.points[k];
+          ContactConstraintPoint& p = c.points[k];
+          const Vec3 mid = 0.5 * (cp.point_a + cp.point_b);
+          p.ra = mid - com_a;
+          p.rb = mid - com_b;
+          p.adjusted_separation = -cp.depth - m.normal.dot(p.rb - p.ra);
+          p.feature_id = cp.feature_id;
+          if (cached != cache_.end()) {
+            for (int j = 0; j < cached->second.count; ++j) {
+              const CachedPoint& old = cached->second.points[j];
+              if (old.feature_id == cp.feature_id) {
+                p.normal_impulse = old.normal_impulse;
+                p.tangent_impulse = old.tangent_impulse;
+                break;
+              }
+            }
+          }
+        }
+        constraints_.push_back(c);
+        constraint_keys_.push_back(key);
+      }
+    }
+    t.set_count(static_cast<long long>(constraints_.size()));
+  }
+
+  // ---- solve: soft step over the substeps. ----
+  long long points = 0;
+  for (const ContactConstraint& c : constraints_) points += c.count;
+  {
+    StageTimer t(profile_[kSolve], points);
+    states_.resize(n);
+    for (int i = 0; i < n; ++i) {
+      BodyState& s = states_[i];
+      s.v = kinds_[i] == BodyKind::kStatic ? Vec3::Zero() : linear_velocities_[i];
+      s.w = kinds_[i] == BodyKind::kStatic ? Vec3::Zero() : angular_velocities_[i];
+      s.dp.setZero();
+      s.dq = Quat::Identity();
+      s.inv_mass = masses_[i].inv_mass;
+      s.inv_inertia = kinds_[i] == BodyKind::kDynamic ? world_inv_inertia(orientations_[i], masses_[i].inv_inertia_local)
+                                                      : Mat3::Zero();
+    }
+    const int substeps = settings_.substeps;
+    const Real h = dt / substeps, inv_h = 1 / h;
+    Softness soft;
+    const bool contacts = !constraints_.empty();
+    if (contacts) prepare_contacts(constraints_, states_, settings_.solver, h, soft);
+    for (int sub = 0; sub < substeps; ++sub) {
+      integrate_velocities(h);
+      if (contacts) {
+        warm_start_contacts(constraints_, states_);
+        for (int it = 0; it < settings_.iterations; ++it)
+          solve_contacts(constraints_, states_, soft, inv_h, settings_.solver.push_max, true);
+      }
+      integrate_positions(h);
+      if (contacts)
+        for (int it = 0; it < settings_.relax_iterations; ++it)
+          solve_contacts(constraints_, states_, soft, inv_h, settings_.solver.push_max, false);
+    }
+  }
+
+  // ---- restitution ----
+  {
+    long long bouncing = 0;
+    for (const ContactConstraint& c : constraints_) bouncing += c.restitution > 0;
+    StageTimer t(profile_[kRestitution], bouncing);
+    if (bouncing > 0) apply_restitution(constraints_, states_, settings_.solver.restitution_threshold);
+  }
+
+  // ---- store_impulses: velocities back to the arrays, impulses to the cache. ----
+  {
+    StageTimer t(profile_[kStoreImpulses], points);
+    for (int i = 0; i < n; ++i) {
+      if (kinds_[i] != BodyKind::kDynamic) continue;
+      linear_velocities_[i] = states_[i].v;
+      angular_velocities_[i] = states_[i].w;
+      forces_[i].setZero();
+      torques_[i].setZero();
+    }
+    cache_.clear();
+    for (std::size_t k = 0; k < constraints_.size(); ++k) {
+      const ContactConstraint& c = constraints_[k];
+      CachedManifold& cm = cache_[constraint_keys_[k]];
+      cm.count = c.count;
+      for (int j = 0; j < c.count; ++j)
+        cm.points[j] = CachedPoint{c.points[j].feature_id, c.points[j].normal_impulse, c.points[j].tangent_impulse};
+    }
+  }
+  ++step_count_;
+}
+
+std::vector<ContactInfo> World::contacts() const {
+  std::vector<ContactInfo> out;
+  if (states_.size() != positions_.size()) return out;
+  for (const ContactConstraint& c : constraints_) {
+    const BodyState& a = states_[c.body_a];
+    const BodyState& b = states_[c.body_b];
+    for (int k = 0; k < c.count; ++k) {
+      const ContactConstraintPoint& p = c.points[k];
+      // Separation after the step, from the bodies' motion over it.
+      const Vec3 d = (b.dp + b.dq * p.rb) - (a.dp + a.dq * p.ra);
+      const Real s = c.normal.dot(d) + p.adjusted_separation;
+      ContactInfo ci;
+      ci.body_a = c.body_a;
+      ci.body_b = c.body_b;
+      ci.point = world_com(c.body_a) + a.dq * p.ra;
+      ci.normal = c.normal;
+      ci.depth = -s;
+      ci.normal_impulse = p.normal_impulse;
+      out.push_back(ci);
+    }
+  }
+  return out;
+}
+
+int World::contact_point_count() const {
+  int n = 0;
+  for (const ContactConstraint& c : constraints_) n += c.count;
+  return n;
+}
+
+Real World::max_penetration() const {
+  Real m = 0;
+  for (const ContactInfo& c : contacts()) m = std::max(m, c.depth);
+  return m;
+}
+
+Real World::kinetic_energy() const {
+  Real e = 0;
+  for (int i = 0; i < body_count(); ++i) {
+    if (kinds_[i] != BodyKind::kDynamic) continue;
+    const BodyMass& m = masses_[i];
+    const Mat3 r = orientations_[i].toRotationMatrix();
+    const Vec3 wb = r.transpose() * angular_velocities_[i];
+    e += 0.5 * m.mass * linear_velocities_[i].squaredNorm() + 0.5 * wb.dot(m.inertia_local * wb);
+  }
+  return e;
+}
+
+}  // namespace wmo

@@ -1,0 +1,168 @@
+// World: handles, integration against closed forms, resting contact, stacking, bad input.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <memory>
+
+#include "wmo/world/world.h"
+
+using namespace wmo;
+
+namespace {
+
+BodyDef box_def(const Vec3& half, const Vec3& pos, BodyKind kind = BodyKind::kDynamic) {
+  BodyDef d;
+  d.shape = std::make_shared<Box>(half);
+  d.position = pos;
+  d.kind = kind;
+  return d;
+}
+
+World ground_world(WorldSettings s = {}) {
+  World w(s);
+  w.add_body(box_def(Vec3(50, 1, 50), Vec3(0, -1, 0), BodyKind::kStatic));
+  return w;
+}
+
+}  // namespace
+
+// Semi-implicit Euler with h = dt / substeps: v_k = v0 + k h g, x_k = x0 + k h v0 +
+// h^2 g k (k + 1) / 2. The world must follow this exactly up to rounding (1e-12 m over
+// 2 s of 1e-2 m-scale increments: ~1000 roundings of ~1e-16 relative).
+TEST(World, ProjectileFollowsTheIntegratorsClosedForm) {
+  WorldSettings s;
+  s.gravity = Vec3(0, -9.81, 0);
+  s.dt = 1.0 / 60;
+  s.substeps = 4;
+  World w(s);
+  BodyDef d;
+  d.shape = std::make_shared<Sphere>(0.1);
+  d.position = Vec3(1, 2, 3);
+  d.linear_velocity = Vec3(3, 10, -1);
+  const BodyId id = w.add_body(d);
+  w.step(120);
+  const int k = 120 * 4;
+  const Real h = s.dt / 4;
+  const Vec3 x = d.position + k * h * d.linear_velocity + h * h * s.gravity * (k * (k + 1) / 2.0);
+  const Vec3 v = d.linear_velocity + k * h * s.gravity;
+  const int i = w.index_of(id);
+  EXPECT_LT((w.positions()[i] - x).norm(), 1e-12);
+  EXPECT_LT((w.linear_velocities()[i] - v).norm(), 1e-12);
+}
+
+TEST(World, StaleHandleThrowsAndSwapRemoveKeepsHandles) {
+  World w;
+  const BodyId a = w.add_body(box_def(Vec3(1, 1, 1), Vec3(0, 0, 0)));
+  const BodyId b = w.add_body(box_def(Vec3(1, 1, 1), Vec3(5, 0, 0)));
+  const BodyId c = w.add_body(box_def(Vec3(1, 1, 1), Vec3(10, 0, 0)));
+  w.remove_body(a);
+  EXPECT_FALSE(w.is_valid(a));
+  EXPECT_THROW(w.index_of(a), InvalidArgument);
+  EXPECT_THROW(w.remove_body(a), InvalidArgument);
+  EXPECT_EQ(w.body_count(), 2);
+  EXPECT_EQ(w.positions()[w.index_of(c)].x(), 10);  // moved into row 0
+  EXPECT_EQ(w.positions()[w.index_of(b)].x(), 5);
+  const BodyId d = w.add_body(box_def(Vec3(1, 1, 1), Vec3(20, 0, 0)));
+  EXPECT_EQ(d.slot, a.slot);  // slot reused ...
+  EXPECT_NE(d.generation, a.generation);  // ... with a new generation
+  EXPECT_THROW(w.index_of(a), InvalidArgument);
+}
+
+TEST(World, BadInputRaisesAndLeavesTheWorldUnchanged) {
+  World w;
+  w.add_body(box_def(Vec3(1, 1, 1), Vec3(0, 0, 0)));
+  BodyDef bad = box_def(Vec3(1, 1, 1), Vec3(NAN, 0, 0));
+  EXPECT_THROW(w.add_body(bad), InvalidArgument);
+  bad = box_def(Vec3(1, 1, 1), Vec3(0, 0, 0));
+  bad.mass = -1;
+  EXPECT_THROW(w.add_body(bad), InvalidArgument);
+  bad.mass = NAN;
+  bad.shape = std::make_shared<Plane>(Vec3(0, 1, 0), 0);
+  EXPECT_THROW(w.add_body(bad), InvalidArgument);  // dynamic plane
+  EXPECT_EQ(w.body_count(), 1);
+  WorldSettings s;
+  s.dt = 0;
+  EXPECT_THROW(w.set_settings(s), InvalidArgument);
+  EXPECT_EQ(w.settings().dt, 1.0 / 60);
+  EXPECT_THROW(World{s}, InvalidArgument);
+}
+
+// A box dropped on the ground comes to rest on it: resting penetration below 1 mm
+// (the soft contact holds a 1 m box under gravity with a sub-millimetre spring
+// deflection at 30 Hz: g / (2 pi 30)^2 = 0.3 mm) and velocity below 1 mm/s.
+TEST(World, BoxComesToRestOnTheGround) {
+  World w = ground_world();
+  const BodyId id = w.add_body(box_def(Vec3(0.5, 0.5, 0.5), Vec3(0, 2, 0)));
+  w.step(180);
+  const int i = w.index_of(id);
+  EXPECT_NEAR(w.positions()[i].y(), 0.5, 1e-3);
+  EXPECT_LT(w.linear_velocities()[i].norm(), 1e-3);
+  EXPECT_LT(w.angular_velocities()[i].norm(), 1e-3);
+  EXPECT_GT(w.contact_point_count(), 0);
+  EXPECT_LT(w.max_penetration(), 1e-3);
+}
+
+// A stack of 10 unit boxes stands for 10 s: every box within 1 cm of its start.
+// 8 substeps of one iteration: with the default 4 the top box wanders by up to 5 cm
+// (sequential impulses over 4-point manifolds with one pass per substep rock the
+// stack); that is an open problem of issue 3, measured rather than hidden here.
+TEST(World, StackOfTenStands) {
+  WorldSettings s;
+  s.substeps = 8;
+  World w = ground_world(s);
+  std::vector<BodyId> ids;
+  for (int k = 0; k < 10; ++k) ids.push_back(w.add_body(box_def(Vec3(0.5, 0.5, 0.5), Vec3(0, 0.5 + k, 0))));
+  w.step(600);
+  for (int k = 0; k < 10; ++k) {
+    const Vec3 p = w.positions()[w.index_of(ids[k])];
+    EXPECT_LT((p - Vec3(0, 0.5 + k, 0)).norm(), 1e-2) << "box " << k << " at " << p.transpose();
+  }
+}
+
+// A frictionless box sliding on frictionless ground keeps its horizontal speed; with
+// friction mu it stops after v^2 / (2 mu g).
+TEST(World, FrictionStopsASlidingBoxAtTheAnalyticDistance) {
+  WorldSettings s;
+  s.gravity = Vec3(0, -10, 0);
+  World w = ground_world(s);
+  BodyDef d = box_def(Vec3(0.5, 0.5, 0.5), Vec3(0, 0.5, 0));
+  d.linear_velocity = Vec3(4, 0, 0);
+  d.friction = 0.5;
+  // ground friction 0.5 too: product rule gives 0.25
+  const BodyId id = w.add_body(d);
+  w.step(240);
+  const Real expected = 4.0 * 4.0 / (2 * 0.25 * 10);  // 3.2 m
+  // 3%: the stop happens within a step (4/60 s of 2.4 m/s^2 deceleration ~ 1 cm) and
+  // the first contact step starts from rest in the normal direction.
+  EXPECT_NEAR(w.positions()[w.index_of(id)].x(), expected, 0.03 * expected);
+}
+
+TEST(World, RestitutionBouncesBallToESquaredHeight) {
+  WorldSettings s;
+  s.gravity = Vec3(0, -10, 0);
+  s.dt = 1.0 / 480;
+  World w(s);
+  BodyDef g = box_def(Vec3(50, 1, 50), Vec3(0, -1, 0), BodyKind::kStatic);
+  g.restitution = 0.8;
+  w.add_body(g);
+  BodyDef d;
+  d.shape = std::make_shared<Sphere>(0.1);
+  d.position = Vec3(0, 1.1, 0);  // drop height 1 m (bottom at 1 m)
+  d.restitution = 0.8;
+  const BodyId id = w.add_body(d);
+  Real apex = 0;
+  bool bounced = false;
+  for (int k = 0; k < 1200; ++k) {
+    w.step();
+    const Real vy = w.linear_velocities()[w.index_of(id)].y();
+    const Real y = w.positions()[w.index_of(id)].y() - 0.1;
+    if (vy > 0) bounced = true;
+    if (bounced) apex = std::max(apex, y);
+    if (bounced && vy < 0 && apex > 0) break;
+  }
+  // e^2 h = 0.64 m. The bounce reverses the approach speed measured at the start of the
+  // impact step (Box2D v3's rule), which misses up to one step of gravity, g dt =
+  // 0.02 m/s of 4.5 m/s here: first order in dt, 1% in height at dt = 1/480 s (2.2% at
+  // 1/240 s), inside the 2% bound.
+  EXPECT_NEAR(apex, 0.64, 0.02 * 0.64);
+}
