@@ -50,7 +50,6 @@ void prepare_contacts(std::vector<ContactConstraint>& cs, const std::vector<Body
   for (ContactConstraint& c : cs) {
     const BodyState& a = states[c.body_a];
     const BodyState& b = states[c.body_b];
-    orthonormal_basis(c.normal, c.tangent1, c.tangent2);
     for (int i = 0; i < c.count; ++i) {
       ContactConstraintPoint& p = c.points[i];
       p.normal_mass = effective_mass(a, b, p.ra, p.rb, c.normal);

@@ -358,6 +358,7 @@ void World::run_step() {
         c.body_a = a;
         c.body_b = b;
         c.normal = m.normal;
+        orthonormal_basis(c.normal, c.tangent1, c.tangent2);
         c.friction = mu;
         c.restitution = e;
         c.count = m.count;
@@ -374,7 +375,7 @@ void World::run_step() {
               const CachedPoint& old = cached->second.points[j];
               if (old.feature_id == cp.feature_id) {
                 p.normal_impulse = old.normal_impulse;
-                p.tangent_impulse = old.tangent_impulse;
+                p.tangent_impulse = {c.tangent1.dot(old.tangent_impulse), c.tangent2.dot(old.tangent_impulse)};
                 break;
               }
             }
@@ -446,7 +447,9 @@ void World::run_step() {
       CachedManifold& cm = cache_[constraint_keys_[k]];
       cm.count = c.count;
       for (int j = 0; j < c.count; ++j)
-        cm.points[j] = CachedPoint{c.points[j].feature_id, c.points[j].normal_impulse, c.points[j].tangent_impulse};
+        cm.points[j] = CachedPoint{c.points[j].feature_id, c.points[j].normal_impulse,
+                                   c.points[j].tangent_impulse[0] * c.tangent1 +
+                                       c.points[j].tangent_impulse[1] * c.tangent2};
     }
   }
   ++step_count_;

@@ -174,7 +174,11 @@ class World {
   struct CachedPoint {
     std::uint32_t feature_id;
     Real normal_impulse;
-    std::array<Real, 2> tangent_impulse;
+    /// Friction impulse as a world vector: the next step's tangent basis may differ
+    /// (orthonormal_basis jumps where the normal's z changes sign, which a vertical
+    /// normal does under the slightest tilt), so components would be applied along the
+    /// wrong directions; the vector is projected onto the new basis instead.
+    Vec3 tangent_impulse;
   };
   struct CachedManifold {
     int count = 0;
