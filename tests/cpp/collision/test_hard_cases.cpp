@@ -420,3 +420,33 @@ TEST(HardCases, NoNanOnFuzz) {
 
 }  // namespace
 }  // namespace wmo
+
+namespace wmo {
+namespace {
+
+// The cross-check's cylinder_cylinder configuration (at 100,000 per pair) where EPA's
+// polytope lost its closest faces to round-off after it had bracketed the depth to
+// 7.6e-13 m: the next closest face lay at 4.6e-3 m, farther than a support distance
+// already seen (7.2e-4 m), and EPA answered with that face: 6.6 mm for a 0.72 mm
+// overlap. Now a face beyond the smallest support distance is recognised as a broken
+// polytope, and the bracket [lower, upper] gathered before the break answers.
+TEST(Regression, Issue2_EpaBrokenPolytopeOnTwoCylindersAnswersTheBracket) {
+  const Cylinder a(0.17649886670952877, 0.08312219825424591), b(0.08736874998323918, 0.27145352861091948);
+  const Pose pa(Vec3(0.39166283332186946, -0.026354932067411685, 0.45497162991828777),
+                Quat(-0.5680673470857549, 0.81130327962868143, 0.077660743647772382, -0.11425973277919502).normalized());
+  const Pose pb(Vec3(0.59338606790127557, 0.11064874339945446, 0.75119705464979525),
+                Quat(-0.83817263481634596, -0.21892622326272509, -0.47709352720151221, -0.14805306249910527).normalized());
+  const DistanceResult r = penetration(a, pa, b, pb);
+  ASSERT_TRUE(r.intersecting);
+  EXPECT_EQ(r.status, QueryStatus::kOk);
+  // The configuration was generated at signed distance -7.2394778991831854e-4 m (by
+  // bisection to ~1e-12 m); libccd's EPA answers 7.2394772675e-4 m. kCurved (3e-8 m) is
+  // EPA's curved-surface resolution for these sub-metre shapes; the old answer was off
+  // by 5.9e-3 m.
+  EXPECT_NEAR(-r.distance, 7.2394778991831854e-4, kCurved);
+  // Valid: translating B by the depth along the normal makes the sets touch.
+  EXPECT_NEAR(support_distance(a, pa, b, pb, r.normal), -r.distance, kCurved);
+}
+
+}  // namespace
+}  // namespace wmo
