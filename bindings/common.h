@@ -88,5 +88,6 @@ py::array vec3_view(const std::vector<Vec3>& points, py::handle owner);
 void bind_math(py::module_& m);
 void bind_shapes(py::module_& m);
 void bind_queries(py::module_& m, py::module_& geometry);
+void bind_world(py::module_& m);
 
 }  // namespace wmo::bindings

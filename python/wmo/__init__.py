@@ -17,6 +17,7 @@ or array shape raises ``TypeError`` naming the expected shape.
 """
 from . import _core
 from ._core import (
+    Body,
     Box,
     Capsule,
     Compound,
@@ -30,12 +31,14 @@ from ._core import (
     Shape,
     Sphere,
     TriangleMesh,
+    World,
 )
 from . import geometry
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "Body",
     "Box",
     "Capsule",
     "Compound",
@@ -49,5 +52,6 @@ __all__ = [
     "Shape",
     "Sphere",
     "TriangleMesh",
+    "World",
     "geometry",
 ]

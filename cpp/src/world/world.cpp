@@ -39,8 +39,8 @@ Mat3 skew(const Vec3& v) {
   return m;
 }
 
-template <class T>
-void swap_remove(std::vector<T>& v, int i) {
+template <class V>
+void swap_remove(V& v, int i) {
   v[i] = std::move(v.back());
   v.pop_back();
 }
@@ -225,6 +225,36 @@ void World::remove_body(BodyId id) {
   states_.clear();
 }
 
+void World::reserve(int n) {
+  positions_.reserve(n);
+  orientations_.reserve(n);
+  linear_velocities_.reserve(n);
+  angular_velocities_.reserve(n);
+}
+
+void World::set_position(BodyId id, const Vec3& position) {
+  const int i = require(id, "set_position");
+  require_finite("position", position);
+  positions_[i] = position;
+}
+
+void World::set_orientation(BodyId id, const Quat& orientation) {
+  const int i = require(id, "set_orientation");
+  orientations_[i] = Pose::checked(Vec3::Zero(), orientation, "body").rotation;
+}
+
+void World::set_linear_velocity(BodyId id, const Vec3& v) {
+  const int i = require(id, "set_linear_velocity");
+  require_finite("linear_velocity", v);
+  linear_velocities_[i] = v;
+}
+
+void World::set_angular_velocity(BodyId id, const Vec3& w) {
+  const int i = require(id, "set_angular_velocity");
+  require_finite("angular_velocity", w);
+  angular_velocities_[i] = w;
+}
+
 void World::apply_impulse(BodyId id, const Vec3& impulse, const Vec3& world_point) {
   const int i = require(id, "apply_impulse");
   require_finite("impulse", impulse);
@@ -252,8 +282,29 @@ void World::apply_torque(BodyId id, const Vec3& torque) {
   torques_[i] += torque;
 }
 
+void World::validate_state() {
+  // The state arrays are writable views: check what the user may have written before
+  // anything moves, so bad values raise and leave the world as it was.
+  auto fail = [](const char* array, int i, const std::string& got) {
+    throw InvalidArgument(std::string(array) + "[" + std::to_string(i) + "] " + got);
+  };
+  for (int i = 0; i < body_count(); ++i) {
+    if (!positions_[i].allFinite()) fail("positions", i, "must be finite, got " + to_string(positions_[i]));
+    if (!linear_velocities_[i].allFinite())
+      fail("linear_velocities", i, "must be finite, got " + to_string(linear_velocities_[i]));
+    if (!angular_velocities_[i].allFinite())
+      fail("angular_velocities", i, "must be finite, got " + to_string(angular_velocities_[i]));
+    const Real qn = orientations_[i].norm();
+    if (!std::isfinite(qn) || std::abs(qn - 1) > kUnitQuatTolerance)
+      fail("orientations", i, "must be a unit quaternion, got norm " + std::to_string(qn));
+  }
+  for (int i = 0; i < body_count(); ++i) orientations_[i].normalize();  // within tolerance: exact unit
+}
+
 void World::step(int n) {
   if (n < 0) throw InvalidArgument("n must be >= 0, got " + std::to_string(n));
+  if (n == 0) return;
+  validate_state();
   for (int k = 0; k < n; ++k) run_step();
 }
 
@@ -457,7 +508,7 @@ void World::run_step() {
 
 std::vector<ContactInfo> World::contacts() const {
   std::vector<ContactInfo> out;
-  if (states_.size() != positions_.size()) return out;
+  if (static_cast<int>(states_.size()) != body_count()) return out;
   for (const ContactConstraint& c : constraints_) {
     const BodyState& a = states_[c.body_a];
     const BodyState& b = states_[c.body_b];

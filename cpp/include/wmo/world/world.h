@@ -30,6 +30,7 @@
 #include "wmo/collision/narrowphase.h"
 #include "wmo/dynamics/body.h"
 #include "wmo/dynamics/contact_solver.h"
+#include "wmo/world/shared_array.h"
 
 namespace wmo {
 
@@ -122,21 +123,37 @@ class World {
   int index_of(BodyId id) const;
   /// Handle of the body in dense row `index`.
   BodyId id_at(int index) const;
-  int body_count() const { return static_cast<int>(positions_.size()); }
+  int body_count() const { return positions_.size(); }
 
-  /// Advances the world by n steps of settings().dt.
+  /// Advances the world by n steps of settings().dt. First checks the state arrays
+  /// (the user may have written them): a non-finite value or a non-unit quaternion
+  /// throws InvalidArgument naming the array and row, and nothing moves.
   void step(int n = 1);
 
   // ---- State (structure of arrays, one row per body, dense order). Writable: the
-  // next step reads what the user wrote (velocities of static bodies are ignored). ----
-  std::vector<Vec3>& positions() { return positions_; }        ///< shape origin, m
-  std::vector<Quat>& orientations() { return orientations_; }  ///< (x, y, z, w) in memory
-  std::vector<Vec3>& linear_velocities() { return linear_velocities_; }    ///< COM, m/s
-  std::vector<Vec3>& angular_velocities() { return angular_velocities_; }  ///< rad/s
-  const std::vector<Vec3>& positions() const { return positions_; }
-  const std::vector<Quat>& orientations() const { return orientations_; }
-  const std::vector<Vec3>& linear_velocities() const { return linear_velocities_; }
-  const std::vector<Vec3>& angular_velocities() const { return angular_velocities_; }
+  // next step reads what the user wrote (velocities of static bodies are ignored; an
+  // orientation written by the user is normalised by the next step). Storage is shared
+  // (shared_array.h) so that NumPy views never dangle. ----
+  SharedArray<Vec3>& positions() { return positions_; }        ///< shape origin, m
+  SharedArray<Quat>& orientations() { return orientations_; }  ///< (x, y, z, w) in memory
+  SharedArray<Vec3>& linear_velocities() { return linear_velocities_; }    ///< COM, m/s
+  SharedArray<Vec3>& angular_velocities() { return angular_velocities_; }  ///< rad/s
+  const SharedArray<Vec3>& positions() const { return positions_; }
+  const SharedArray<Quat>& orientations() const { return orientations_; }
+  const SharedArray<Vec3>& linear_velocities() const { return linear_velocities_; }
+  const SharedArray<Vec3>& angular_velocities() const { return angular_velocities_; }
+  /// Reserves room for n bodies, so adding up to n keeps existing views attached.
+  void reserve(int n);
+
+  /// Validating setters for one body's state (the arrays above are the unchecked,
+  /// zero-copy route). Throw InvalidArgument naming the field for a stale handle, a
+  /// non-finite value or a non-unit quaternion (kUnitQuatTolerance); the world is then
+  /// unchanged. The position is of the shape's origin (m, world), the velocities of the
+  /// centre of mass (m/s, rad/s, world); the orientation is renormalised.
+  void set_position(BodyId id, const Vec3& position);
+  void set_orientation(BodyId id, const Quat& orientation);
+  void set_linear_velocity(BodyId id, const Vec3& v);
+  void set_angular_velocity(BodyId id, const Vec3& w);
 
   BodyKind kind(int index) const { return kinds_[index]; }
   const BodyMass& mass(int index) const { return masses_[index]; }
@@ -190,15 +207,16 @@ class World {
   void integrate_velocities(Real h);
   void integrate_positions(Real h);
   void run_step();
+  void validate_state();
 
   WorldSettings settings_;
   std::unique_ptr<Broadphase> broadphase_;
 
   // Dense per-body arrays.
-  std::vector<Vec3> positions_;
-  std::vector<Quat> orientations_;
-  std::vector<Vec3> linear_velocities_;
-  std::vector<Vec3> angular_velocities_;
+  SharedArray<Vec3> positions_;
+  SharedArray<Quat> orientations_;
+  SharedArray<Vec3> linear_velocities_;
+  SharedArray<Vec3> angular_velocities_;
   std::vector<BodyKind> kinds_;
   std::vector<BodyMass> masses_;
   std::vector<std::shared_ptr<const Shape>> shapes_;

@@ -1,0 +1,307 @@
+// wmo.World and wmo.Body (cpp/include/wmo/world/world.h). Thin: argument parsing,
+// zero-copy state views and GIL release around step().
+//
+// Views: world.positions (N, 3), orientations (N, 4, x y z w), linear_velocities and
+// angular_velocities (N, 3) are writable float64 views of the world's own storage.
+// Each keeps that storage alive (a capsule holding its shared_ptr), so a view never
+// dangles: after add_body grows the world past its capacity, an old view is a detached
+// copy (re-read the property; World.reserve(n) avoids the growth); after remove_body
+// its row count is stale. Re-read the property after adding or removing bodies.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <cmath>
+#include <memory>
+#include <optional>
+
+#include "common.h"
+#include "wmo/world/world.h"
+
+namespace wmo::bindings {
+
+namespace {
+
+/// A body as Python sees it: the world (kept alive) and the handle.
+struct PyBody {
+  py::object world;  // the Python World object
+  BodyId id;
+};
+
+World& world_of(const PyBody& b) { return b.world.cast<World&>(); }
+
+template <class T, int kCols>
+py::array state_view(SharedArray<T>& arr, int rows) {
+  static_assert(sizeof(T) == kCols * sizeof(double), "tightly packed rows of doubles");
+  // The capsule owns a copy of the shared_ptr: the storage lives as long as the view.
+  auto* keep = new std::shared_ptr<T[]>(arr.shared());
+  py::capsule owner(keep, [](void* p) { delete static_cast<std::shared_ptr<T[]>*>(p); });
+  double* data = rows > 0 ? reinterpret_cast<double*>(arr.data()) : nullptr;
+  static double empty_dummy[1] = {0};
+  return py::array_t<double>({static_cast<py::ssize_t>(rows), static_cast<py::ssize_t>(kCols)},
+                             {static_cast<py::ssize_t>(kCols * sizeof(double)), static_cast<py::ssize_t>(sizeof(double))},
+                             data ? data : empty_dummy, owner);
+}
+
+Real opt_real(const py::object& o, const char* field) {
+  if (o.is_none()) return std::numeric_limits<Real>::quiet_NaN();
+  try {
+    return o.cast<Real>();
+  } catch (const py::cast_error&) {
+    throw py::type_error(std::string(field) + " must be a number or None");
+  }
+}
+
+py::dict stage_dict(const StageProfile& p) {
+  py::dict d;
+  d["seconds"] = p.seconds;
+  d["count"] = p.count;
+  d["total_seconds"] = p.total_seconds;
+  d["total_count"] = p.total_count;
+  d["runs"] = p.runs;
+  return d;
+}
+
+}  // namespace
+
+void bind_world(py::module_& m) {
+  py::class_<PyBody>(m, "Body", R"doc(
+Handle of a body in a World (from World.add_body). It stays valid until the body is
+removed; using it afterwards raises ValueError. ``index`` is the body's current row in
+the world's state arrays (it changes when another body is removed).
+)doc")
+      .def_property_readonly("index", [](const PyBody& b) { return world_of(b).index_of(b.id); },
+                             "Current row in the world's (N, ...) state arrays.")
+      .def_property_readonly("slot", [](const PyBody& b) { return b.id.slot; })
+      .def_property_readonly("generation", [](const PyBody& b) { return b.id.generation; })
+      .def_property_readonly("valid", [](const PyBody& b) { return world_of(b).is_valid(b.id); },
+                             "False once the body has been removed.")
+      .def_property_readonly("kind", [](const PyBody& b) {
+        World& w = world_of(b);
+        return std::string(to_string(w.kind(w.index_of(b.id))));
+      })
+      .def_property_readonly("mass", [](const PyBody& b) {
+        World& w = world_of(b);
+        return w.mass(w.index_of(b.id)).mass;
+      }, "Mass (kg); 0 for static and kinematic bodies.")
+      .def_property(
+          "position", [](const PyBody& b) { return to_array(world_of(b).positions()[world_of(b).index_of(b.id)]); },
+          [](const PyBody& b, py::object v) { world_of(b).set_position(b.id, to_vec3(v, "position")); },
+          "Shape-frame origin (m, world); a copy. Setting it validates the value.")
+      .def_property(
+          "orientation",
+          [](const PyBody& b) { return to_array(world_of(b).orientations()[world_of(b).index_of(b.id)]); },
+          [](const PyBody& b, py::object q) { world_of(b).set_orientation(b.id, to_quat_xyzw(q, "orientation")); },
+          "Unit quaternion (x, y, z, w); a copy. Setting it validates the value.")
+      .def_property(
+          "linear_velocity",
+          [](const PyBody& b) { return to_array(world_of(b).linear_velocities()[world_of(b).index_of(b.id)]); },
+          [](const PyBody& b, py::object v) {
+            world_of(b).set_linear_velocity(b.id, to_vec3(v, "linear_velocity"));
+          },
+          "Centre-of-mass velocity (m/s, world); a copy. Setting it validates the value.")
+      .def_property(
+          "angular_velocity",
+          [](const PyBody& b) { return to_array(world_of(b).angular_velocities()[world_of(b).index_of(b.id)]); },
+          [](const PyBody& b, py::object w) {
+            world_of(b).set_angular_velocity(b.id, to_vec3(w, "angular_velocity"));
+          },
+          "Angular velocity (rad/s, world); a copy. Setting it validates the value.")
+      .def("__eq__", [](const PyBody& a, const PyBody& b) { return a.world.is(b.world) && a.id == b.id; })
+      .def("__hash__", [](const PyBody& b) { return py::hash(py::make_tuple(b.id.slot, b.id.generation)); })
+      .def("__repr__", [](const PyBody& b) {
+        const World& w = world_of(b);
+        if (!w.is_valid(b.id)) return std::string("Body(removed)");
+        const int i = w.index_of(b.id);
+        return "Body(index=" + std::to_string(i) + ", kind='" + to_string(w.kind(i)) +
+               "', position=" + repr_vec(w.positions()[i]) + ")";
+      });
+
+  py::class_<World>(m, "World", R"doc(
+A rigid-body world. Units: metres, kilograms, seconds, radians.
+
+Parameters
+----------
+gravity : (3,) m/s^2, default (0, -9.81, 0).
+dt : step length (s), default 1/60.
+substeps : soft-step substeps per step (default 4): more give stiffer contacts.
+iterations : velocity iterations per substep (default 1).
+relax_iterations : relax passes per substep (default 1).
+contact_hertz, contact_damping_ratio, contact_push_max : the soft contact spring
+    (Hz, ratio, m/s), defaults 30, 10, 3.
+restitution_threshold : approach speed (m/s) below which nothing bounces (default 1).
+speculative_distance : contacts are made this close before touching (m, default 0.04).
+friction_combine, restitution_combine : 'multiply' (default for friction, Bullet's rule),
+    'geometric_mean', 'max' (default for restitution), 'min' or 'average'.
+gyroscopic : integrate the gyroscopic term (default False).
+
+State arrays (world.positions, orientations, linear_velocities, angular_velocities)
+are zero-copy, writable views; see the module notes on their lifetime.
+)doc")
+      .def(py::init([](py::object gravity, double dt, int substeps, int iterations, int relax_iterations,
+                       double contact_hertz, double contact_damping_ratio, double contact_push_max,
+                       double restitution_threshold, double speculative_distance, const std::string& friction_combine,
+                       const std::string& restitution_combine, bool gyroscopic) {
+             WorldSettings s;
+             s.gravity = gravity.is_none() ? Vec3(0, -9.81, 0) : to_vec3(gravity, "gravity");
+             s.dt = dt;
+             s.substeps = substeps;
+             s.iterations = iterations;
+             s.relax_iterations = relax_iterations;
+             s.solver.contact_hertz = contact_hertz;
+             s.solver.damping_ratio = contact_damping_ratio;
+             s.solver.push_max = contact_push_max;
+             s.solver.restitution_threshold = restitution_threshold;
+             s.speculative_distance = speculative_distance;
+             s.friction_combine = combine_rule_from_string(friction_combine);
+             s.restitution_combine = combine_rule_from_string(restitution_combine);
+             s.gyroscopic = gyroscopic;
+             return std::make_unique<World>(s);
+           }),
+           py::arg("gravity") = py::none(), py::arg("dt") = 1.0 / 60, py::arg("substeps") = 4,
+           py::arg("iterations") = 1, py::arg("relax_iterations") = 1, py::arg("contact_hertz") = 30.0,
+           py::arg("contact_damping_ratio") = 10.0, py::arg("contact_push_max") = 3.0,
+           py::arg("restitution_threshold") = 1.0, py::arg("speculative_distance") = 0.04,
+           py::arg("friction_combine") = "multiply", py::arg("restitution_combine") = "max",
+           py::arg("gyroscopic") = false)
+      .def(
+          "add_body",
+          [](py::object self, std::shared_ptr<Shape> shape, py::object position, py::object orientation,
+             const std::string& kind, py::object mass, double density, double friction, double restitution,
+             py::object linear_velocity, py::object angular_velocity, double linear_damping, double angular_damping,
+             double gravity_scale) {
+            World& w = self.cast<World&>();
+            BodyDef d;
+            d.shape = std::move(shape);
+            d.kind = body_kind_from_string(kind);
+            if (!position.is_none()) d.position = to_vec3(position, "position");
+            if (!orientation.is_none()) d.orientation = to_quat_xyzw(orientation, "orientation");
+            d.mass = opt_real(mass, "mass");
+            d.density = density;
+            d.friction = friction;
+            d.restitution = restitution;
+            if (!linear_velocity.is_none()) d.linear_velocity = to_vec3(linear_velocity, "linear_velocity");
+            if (!angular_velocity.is_none()) d.angular_velocity = to_vec3(angular_velocity, "angular_velocity");
+            d.linear_damping = linear_damping;
+            d.angular_damping = angular_damping;
+            d.gravity_scale = gravity_scale;
+            return PyBody{self, w.add_body(d)};
+          },
+          py::arg("shape"), py::arg("position") = py::none(), py::arg("orientation") = py::none(),
+          py::arg("kind") = "dynamic", py::arg("mass") = py::none(), py::arg("density") = 1000.0,
+          py::arg("friction") = 0.5, py::arg("restitution") = 0.0, py::arg("linear_velocity") = py::none(),
+          py::arg("angular_velocity") = py::none(), py::arg("linear_damping") = 0.0, py::arg("angular_damping") = 0.0,
+          py::arg("gravity_scale") = 1.0, R"doc(
+Adds a body and returns its Body handle. ``kind`` is 'dynamic' (default), 'static' or
+'kinematic'. ``mass`` (kg) overrides ``density`` (kg/m^3); the inertia follows the shape.
+Position (m) and orientation (x, y, z, w) place the shape's frame; velocities are of
+the centre of mass (m/s, rad/s, world frame). Bad values raise ValueError naming the
+field; the world is unchanged. Existing state views may detach (see World).
+)doc")
+      .def(
+          "remove_body",
+          [](World& w, const PyBody& b) {
+            if (&b.world.cast<World&>() != &w) throw InvalidArgument("body belongs to another world");
+            w.remove_body(b.id);
+          },
+          py::arg("body"), "Removes a body; its handle becomes invalid and the last body takes its row.")
+      .def(
+          "body",
+          [](py::object self, int index) { return PyBody{self, self.cast<World&>().id_at(index)}; },
+          py::arg("index"), "The Body in row ``index``.")
+      .def("reserve", &World::reserve, py::arg("n"),
+           "Reserves storage for n bodies so that adding up to n keeps state views attached.")
+      .def(
+          "step", [](World& w, int n) { w.step(n); }, py::arg("n") = 1, py::call_guard<py::gil_scoped_release>(),
+          "Advances n steps of dt (the GIL is released). Checks the state arrays first: a "
+          "non-finite value or a non-unit quaternion raises ValueError and nothing moves.")
+      .def_property_readonly("positions", [](World& w) { return state_view<Vec3, 3>(w.positions(), w.body_count()); },
+                             "(N, 3) writable view: shape-frame origins (m).")
+      .def_property_readonly("orientations",
+                             [](World& w) { return state_view<Quat, 4>(w.orientations(), w.body_count()); },
+                             "(N, 4) writable view: unit quaternions (x, y, z, w).")
+      .def_property_readonly(
+          "linear_velocities", [](World& w) { return state_view<Vec3, 3>(w.linear_velocities(), w.body_count()); },
+          "(N, 3) writable view: centre-of-mass velocities (m/s).")
+      .def_property_readonly(
+          "angular_velocities", [](World& w) { return state_view<Vec3, 3>(w.angular_velocities(), w.body_count()); },
+          "(N, 3) writable view: angular velocities (rad/s, world frame).")
+      .def_property_readonly("body_count", &World::body_count)
+      .def("__len__", &World::body_count)
+      .def_property_readonly("dt", [](const World& w) { return w.settings().dt; })
+      .def_property_readonly("gravity", [](const World& w) { return to_array(w.settings().gravity); })
+      .def_property_readonly("substeps", [](const World& w) { return w.settings().substeps; })
+      .def_property_readonly("iterations", [](const World& w) { return w.settings().iterations; })
+      .def_property_readonly("step_count", &World::step_count)
+      .def(
+          "apply_impulse",
+          [](World& w, const PyBody& b, py::object impulse, py::object point) {
+            w.apply_impulse(b.id, to_vec3(impulse, "impulse"), to_vec3(point, "point"));
+          },
+          py::arg("body"), py::arg("impulse"), py::arg("point"),
+          "Applies an impulse (N s, world) at a world point (m) to a dynamic body.")
+      .def(
+          "apply_force",
+          [](World& w, const PyBody& b, py::object force, py::object point) {
+            w.apply_force(b.id, to_vec3(force, "force"), to_vec3(point, "point"));
+          },
+          py::arg("body"), py::arg("force"), py::arg("point"),
+          "Applies a force (N, world) at a world point (m) during the next step.")
+      .def(
+          "apply_torque", [](World& w, const PyBody& b, py::object torque) { w.apply_torque(b.id, to_vec3(torque, "torque")); },
+          py::arg("body"), py::arg("torque"), "Applies a torque (N m, world) during the next step.")
+      .def_property_readonly("contact_count", &World::contact_point_count,
+                             "Contact points of the last step.")
+      .def_property_readonly("max_penetration", &World::max_penetration,
+                             "Deepest penetration among the last step's contact points (m).")
+      .def("kinetic_energy", &World::kinetic_energy, "Kinetic energy of the dynamic bodies (J).")
+      .def_property_readonly(
+          "contacts",
+          [](const World& w) {
+            const std::vector<ContactInfo> cs = w.contacts();
+            const auto n = static_cast<py::ssize_t>(cs.size());
+            py::array_t<int> pairs({n, py::ssize_t(2)});
+            py::array_t<double> point({n, py::ssize_t(3)}), normal({n, py::ssize_t(3)});
+            py::array_t<double> depth(n), impulse(n);
+            auto pr = pairs.mutable_unchecked<2>();
+            auto pt = point.mutable_unchecked<2>();
+            auto nr = normal.mutable_unchecked<2>();
+            auto dp = depth.mutable_unchecked<1>();
+            auto im = impulse.mutable_unchecked<1>();
+            for (py::ssize_t i = 0; i < n; ++i) {
+              pr(i, 0) = cs[i].body_a;
+              pr(i, 1) = cs[i].body_b;
+              for (int k = 0; k < 3; ++k) {
+                pt(i, k) = cs[i].point[k];
+                nr(i, k) = cs[i].normal[k];
+              }
+              dp(i) = cs[i].depth;
+              im(i) = cs[i].normal_impulse;
+            }
+            py::dict d;
+            d["bodies"] = pairs;
+            d["point"] = point;
+            d["normal"] = normal;
+            d["depth"] = depth;
+            d["normal_impulse"] = impulse;
+            return d;
+          },
+          "Contact points of the last step as arrays: bodies (M, 2) rows, point (M, 3), normal "
+          "(M, 3, from the first body to the second), depth (M,, m, > 0 overlapping), "
+          "normal_impulse (M,, N s over the last substep).")
+      .def_property_readonly(
+          "profile",
+          [](const World& w) {
+            py::dict d;
+            for (std::size_t k = 0; k < kStageNames.size(); ++k) d[kStageNames[k]] = stage_dict(w.profile()[k]);
+            return d;
+          },
+          "Per-stage profile: {stage: {seconds, count, total_seconds, total_count, runs}} for "
+          "the last step (seconds, count) and accumulated (total_*, runs = steps with work).")
+      .def("__repr__", [](const World& w) {
+        return "World(bodies=" + std::to_string(w.body_count()) + ", dt=" + repr_real(w.settings().dt) +
+               ", substeps=" + std::to_string(w.settings().substeps) + ")";
+      });
+}
+
+}  // namespace wmo::bindings
