@@ -53,8 +53,8 @@ Real plane_alignment(const SupportingFace& f, const Vec3& n_out) {
 
 bool collide_convex_convex(const ConvexShape& a, const ConvexShape& b, const Pose& b_in_a,
                            const CollideSettings& settings, Manifold& m) {
-  const DistanceResult r = penetration_convex_convex(a, b, b_in_a, settings.gjk, settings.epa);
   const Real margin = settings.margin;
+  const DistanceResult r = penetration_convex_convex(a, b, b_in_a, settings.gjk, settings.epa, margin);
   if (!(r.distance <= margin)) return false;  // also rejects NaN
   Vec3 N = r.normal;
   // Normal undefined (exactly touching at one point with no overlap information): the

@@ -49,9 +49,10 @@ Real simplex_scale(const Simplex& s) {
 template <class SA, class SB>
 DistanceResult core_pair(const SA& ca, Real ra, const SB& cb, Real rb, const Pose& b_in_a,
                          bool signed_distance, const GjkSettings& gjk_settings,
-                         const EpaSettings& epa_settings) {
+                         const EpaSettings& epa_settings, Real cull = kInf) {
   DistanceResult r;
-  const GjkResult g = gjk_distance(ca, cb, b_in_a, gjk_settings, b_in_a.position);
+  // The cores are farther apart than the shapes by ra + rb.
+  const GjkResult g = gjk_distance(ca, cb, b_in_a, gjk_settings, b_in_a.position, cull + ra + rb);
   r.status = g.status;
   r.iterations = g.iterations;
   const Real radii = ra + rb;
@@ -326,7 +327,7 @@ DistanceResult distance_convex_convex(const ConvexShape& a, const ConvexShape& b
 
 DistanceResult penetration_convex_convex(const ConvexShape& a, const ConvexShape& b,
                                          const Pose& b_in_a, const GjkSettings& gjk,
-                                         const EpaSettings& epa) {
+                                         const EpaSettings& epa, Real cull_distance) {
   DistanceResult exact;
   if (a.type() == ShapeType::kSphere && b.type() == ShapeType::kCylinder &&
       sphere_in_cylinder(static_cast<const Sphere&>(a), static_cast<const Cylinder&>(b), b_in_a, exact))
@@ -346,7 +347,7 @@ DistanceResult penetration_convex_convex(const ConvexShape& a, const ConvexShape
       using A = std::decay_t<decltype(ca)>;
       using B = std::decay_t<decltype(cb)>;
       return core_pair(CoreSupport<A>(ca), ca.radius(), CoreSupport<B>(cb), cb.radius(), b_in_a,
-                       true, gjk, epa);
+                       true, gjk, epa, cull_distance);
     });
   });
 }

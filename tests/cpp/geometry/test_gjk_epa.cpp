@@ -639,3 +639,45 @@ TEST(Regression, Issue2_EpaNeverAnswersZeroForClearOverlapOnCylinderRim) {
 
 }  // namespace
 }  // namespace wmo
+
+namespace wmo {
+namespace {
+
+// gjk_distance's cull: it may stop early only when the distance really exceeds the
+// cull distance, and below it the answer is the same as without a cull. Cylinder
+// cores (curved: GJK needs many iterations there) against box cores, centres 0.5..1.5 m
+// apart (overlapping to 0.8 m apart), culled at 0.1 m.
+TEST(Gjk, CullStopsOnlyBeyondTheCullDistance) {
+  std::mt19937 rng(77);
+  std::uniform_real_distribution<Real> u(0, 1);
+  const Cylinder a(0.4, 0.3);
+  const Box b(Vec3(0.2, 0.5, 0.3));
+  const CoreSupport<Cylinder> sa(a);
+  const CoreSupport<Box> sb(b);
+  const Real cull = 0.1;
+  int culled = 0, kept = 0, fewer_iterations = 0;
+  for (int i = 0; i < 2000; ++i) {
+    const Pose b_in_a((0.5 + 1.0 * u(rng)) * random_unit(rng), random_rotation(rng));
+    const GjkResult full = gjk_distance(sa, sb, b_in_a, GjkSettings{}, b_in_a.position);
+    const GjkResult c = gjk_distance(sa, sb, b_in_a, GjkSettings{}, b_in_a.position, cull);
+    if (c.culled) {
+      ++culled;
+      // A separating plane proved distance > cull: the exact distance agrees (GJK's
+      // tolerance 1e-10 relative is far below the cull margin).
+      EXPECT_GT(full.distance, cull) << i;
+      EXPECT_GE(c.distance, full.distance * (1 - 1e-9)) << i;  // |v| bounds the distance from above
+      fewer_iterations += c.iterations < full.iterations;
+    } else {
+      ++kept;
+      EXPECT_EQ(c.distance, full.distance) << i;  // the same run to the end
+      EXPECT_EQ(c.intersecting, full.intersecting) << i;
+    }
+    if (full.distance <= cull) EXPECT_FALSE(c.culled) << i;
+  }
+  EXPECT_GT(culled, 500);  // both branches exercised
+  EXPECT_GT(kept, 100);
+  EXPECT_GT(fewer_iterations, culled / 2);  // and the cull saves work
+}
+
+}  // namespace
+}  // namespace wmo

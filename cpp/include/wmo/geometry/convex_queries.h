@@ -35,9 +35,12 @@ DistanceResult distance_convex_convex(const ConvexShape& a, const ConvexShape& b
 /// status: kOk, kMaxIterations (best answer so far) or kDegenerate (see
 /// epa_penetration in gjk.h: e.g. concentric spheres get depth ra + rb along B's offset
 /// or +X).
+/// `cull_distance` (m, default kInf): a caller that only wants pairs closer than this
+/// (contact generation within a margin) lets GJK stop at the first separating plane
+/// that proves the distance larger; `distance` is then only some value > cull_distance.
 DistanceResult penetration_convex_convex(const ConvexShape& a, const ConvexShape& b,
                                          const Pose& b_in_a, const GjkSettings& gjk = {},
-                                         const EpaSettings& epa = {});
+                                         const EpaSettings& epa = {}, Real cull_distance = kInf);
 
 /// True if convex A and B touch or overlap (GJK on the cores with margin ra + rb,
 /// exiting early on a separating plane).

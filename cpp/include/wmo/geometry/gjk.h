@@ -205,6 +205,9 @@ struct GjkResult {
   /// intersecting.
   Vec3 normal = Vec3::Zero();
   int iterations = 0;
+  /// True when gjk_distance stopped early because the distance is known to exceed its
+  /// `cull` argument; `distance` is then an upper bound (> cull), not the distance.
+  bool culled = false;
   /// Final simplex (EPA's seed when intersecting).
   Simplex simplex;
 };
@@ -430,10 +433,11 @@ constexpr int kGjkMaxRestarts = 4;
 
 // The GJK loop shared by gjk_distance (kBoolean = false) and gjk_intersect (true).
 // In boolean mode it stops as soon as a plane separates A - B from the ball of radius
-// `margin` about the origin, or |v| <= margin.
+// `margin` about the origin, or |v| <= margin. In distance mode it stops as soon as a
+// plane proves the distance greater than `cull` (kInf: never), reporting |v| (> cull).
 template <bool kBoolean, class SA, class SB>
 GjkResult gjk_run(const SA& sa, const SB& sb, const Pose& b_in_a, const GjkSettings& settings,
-                  const Vec3& initial_dir, Real margin, bool* boolean_out) {
+                  const Vec3& initial_dir, Real margin, bool* boolean_out, Real cull = kInf) {
   const MinkowskiSupport<SA, SB> support(sa, sb, b_in_a);
   GjkResult res;
   Simplex& s = res.simplex;
@@ -480,6 +484,14 @@ GjkResult gjk_run(const SA& sa, const SB& sb, const Pose& b_in_a, const GjkSetti
       // v.w / |v| is a lower bound on the distance (van den Bergen 2003, 4.3.3).
       if (vw > 0 && vw * vw > margin * margin * dist2) {
         separated = true;
+        break;
+      }
+    } else {
+      // The same lower bound against the caller's cull distance: farther than that,
+      // the exact distance is not wanted (contact generation within a margin), and on
+      // curved shapes GJK would need many more iterations to converge to it.
+      if (vw > 0 && vw * vw > cull * cull * dist2) {
+        res.culled = true;
         break;
       }
     }
@@ -581,10 +593,13 @@ GjkResult gjk_run(const SA& sa, const SB& sb, const Pose& b_in_a, const GjkSetti
 /// A stall without a separating plane (an ill-conditioned simplex on curved supports)
 /// restarts the simplex from the newest support point, at most kGjkMaxRestarts times;
 /// the best simplex seen is what is reported.
+/// `cull` (m, default kInf): stop as soon as a separating plane proves the distance
+/// greater than this; the result then has culled = true and distance = |v| > cull (an
+/// upper bound of a distance known to exceed cull), normal and points of that simplex.
 template <class SA, class SB>
 GjkResult gjk_distance(const SA& sa, const SB& sb, const Pose& b_in_a, const GjkSettings& s = {},
-                       const Vec3& initial_dir = Vec3::UnitX()) {
-  return detail::gjk_run<false>(sa, sb, b_in_a, s, initial_dir, 0, nullptr);
+                       const Vec3& initial_dir = Vec3::UnitX(), Real cull = kInf) {
+  return detail::gjk_run<false>(sa, sb, b_in_a, s, initial_dir, 0, nullptr, cull);
 }
 
 /// True if the distance between A and B is <= `margin` (m; 0 means touching or
