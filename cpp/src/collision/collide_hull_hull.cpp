@@ -174,6 +174,8 @@ struct Workspace {
   std::vector<int> edge_of_half_a;   ///< per half-edge of A: its edge index
   std::vector<char> edge_ready_a;    ///< per edge of A: edges_a[k] filled this call
   VertexSoA verts_a, verts_b;        ///< A's and B's vertices, each in its own frame
+  std::vector<Vec3> verts_b_in_a;    ///< B's vertices moved into A's frame
+  std::vector<Vec3> neg_normals_b;   ///< B's face normals, negated, in A's frame
 };
 
 Workspace& workspace() {
@@ -193,8 +195,19 @@ bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_i
   const auto& fa = a.faces();
   const auto& fb = b.faces();
 
-  // ---- Face queries of A.
+  // B's vertices and negated face normals in A's frame, once: the queries below use
+  // each several times (a vertex per edge it ends, a normal per edge it borders), and
+  // the matrix product is cheaper than a quaternion rotation.
   Workspace& ws = workspace();
+  const Vec3 t = b_in_a.position;
+  ws.verts_b_in_a.resize(b.vertices().size());
+  for (std::size_t i = 0; i < b.vertices().size(); ++i) ws.verts_b_in_a[i] = R * b.vertices()[i] + t;
+  ws.neg_normals_b.resize(fb.size());
+  for (std::size_t g = 0; g < fb.size(); ++g) ws.neg_normals_b[g] = -(R * fb[g].normal);
+  const std::vector<Vec3>& qb = ws.verts_b_in_a;
+  const std::vector<Vec3>& nb = ws.neg_normals_b;
+
+  // ---- Face queries of A.
   const bool brute_a = a.vertices().size() <= kBruteSupportMax;
   const bool brute_b = b.vertices().size() <= kBruteSupportMax;
   if (brute_a) ws.verts_a.assign(a.vertices());
@@ -217,8 +230,7 @@ bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_i
   for (int f = 0; f < static_cast<int>(fa.size()); ++f) {
     const Vec3& nf = fa[f].normal;
     if (std::min(nf.dot(centroid_b), nf.dot(deepest_b)) - fa[f].offset < sep_a - prune_slack) continue;
-    const Vec3 p = b_in_a.transform_point(b.vertices()[brute_b ? ws.verts_b.support_index(R.transpose() * -nf)
-                                                               : b.support_index(R.transpose() * -nf)]);
+    const Vec3& p = qb[brute_b ? ws.verts_b.support_index(R.transpose() * -nf) : b.support_index(R.transpose() * -nf)];
     const Real s = nf.dot(p) - fa[f].offset;
     if (s > reach) return false;
     if (s > sep_a) {
@@ -234,8 +246,7 @@ bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_i
   int face_b = 0;
   for (int g = 0; g < static_cast<int>(fb.size()); ++g) {
     Real max_dot = kInf;
-    const int va = brute_a ? ws.verts_a.support_index(R * -fb[g].normal, &max_dot)
-                           : a.support_index(R * -fb[g].normal);
+    const int va = brute_a ? ws.verts_a.support_index(nb[g], &max_dot) : a.support_index(nb[g]);
     ws.support_a[g] = va;
     // Pruning (exact), as for A's faces: s below is, up to round-off, -max_dot +
     // n_g.(a_in_b.position) - offset_g; if even that plus the slack can neither beat
@@ -315,10 +326,10 @@ bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_i
     const int g1 = eb.face, g2 = hb[eb.twin].face;
     const int v_start = ws.support_a[g1], v_end = ws.support_a[g2];
     if (v_start == v_end) continue;
-    const Vec3 q0 = b_in_a.transform_point(b.vertices()[eb.origin]);
-    const Vec3 q1 = b_in_a.transform_point(b.vertices()[hb[eb.next].origin]);
-    const Vec3 c = -(R * fb[g1].normal);
-    const Vec3 d = -(R * fb[g2].normal);
+    const Vec3& q0 = qb[eb.origin];
+    const Vec3& q1 = qb[hb[eb.next].origin];
+    const Vec3& c = nb[g1];
+    const Vec3& d = nb[g2];
     const Vec3 dxc = d.cross(c);
     const Vec3 e2 = q1 - q0;
     const Real e2_len2 = e2.squaredNorm();
