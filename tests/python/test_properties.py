@@ -71,15 +71,11 @@ def involves_cylinder(a, b):
     return isinstance(a, wmo.Cylinder) or isinstance(b, wmo.Cylinder)
 
 
-# Known limitation (issue 2, open): a cylinder's supporting face is its cap as a 16-gon
-# whose orientation is fixed for tilts below 0.05 rad (Cylinder::supporting_face), so
-# the clipped manifold's deepest point can differ from the exact EPA depth by up to
-# ~1e-3 of the radius, more than TOL. The manifold properties are therefore checked
-# without cylinders; test_issue_2_cylinder_cap_manifold_mirrors pins a failing case and
-# is expected to fail until the cap manifold is exact.
+# The manifold's deepest point is the EPA depth for every pair, cylinders included:
+# clipped points deeper than it are raised to it and a shallower clip gets the EPA
+# point added (collide_convex.cpp), so both orders agree on the depth.
 @given(a=convex_shapes(), b=convex_shapes(), pa=poses(), pb=poses(), special=st.booleans())
 def test_swapping_a_and_b_mirrors_the_manifold(a, b, pa, pb, special):
-    assume(not involves_cylinder(a, b))
     check_mirror(a, pa, b, pb, special)
 
 
@@ -121,6 +117,10 @@ def check_mirror(a, pa, b, pb, special):
 @given(a=convex_shapes(), b=convex_shapes(), pa=poses(), pb=poses(), motion=poses(),
        special=st.booleans())
 def test_common_rigid_motion_moves_the_manifold(a, b, pa, pb, motion, special):
+    # Not with cylinders: on a curved side the depth is flat to second order about the
+    # optimum, so EPA's normal is good only to ~sqrt(depth tolerance / size) (1e-4 rad
+    # at 1e-8), and the cap polygon turns with it; points then move by more than TOL
+    # under a rigid motion (found by HYPOTHESIS_PROFILE=explore: 1.7e-5 m).
     assume(not involves_cylinder(a, b))
     check_motion(a, pa, b, pb, motion, special)
 
@@ -145,11 +145,38 @@ def check_motion(a, pa, b, pb, motion, special):
         np.testing.assert_allclose(np.sort(m0.depths), np.sort(m1.depths), atol=TOL)
 
 
-@pytest.mark.xfail(strict=True, reason="cylinder cap manifold is a fixed 16-gon at small tilt")
-def test_issue_2_cylinder_cap_manifold_mirrors():
-    check_mirror(wmo.Capsule(radius=1.0, half_height=1.0), wmo.Pose(orientation=(0, 1, 0, 0)),
-                 wmo.Cylinder(radius=1.0, half_height=1.0),
-                 wmo.Pose(orientation=(0.9999923706927791, 0.0039062201980186685, 0, 0)), False)
+# A capsule through a cylinder, both nearly on the Z axis (found by the mirror property
+# when cylinders were first included): in this order EPA on the capsule's segment core
+# against the cylinder reaches its 128-iteration cap with the bracket still 8e-5 m wide;
+# the other order converges to the true depth, 2 m.
+CAPSULE_THROUGH_CYLINDER = (
+    wmo.Capsule(radius=1.0, half_height=1.0), wmo.Pose(orientation=(0, 1, 0, 0)),
+    wmo.Cylinder(radius=1.0, half_height=1.0),
+    wmo.Pose(orientation=(0.9999923706927791, 0.0039062201980186685, 0, 0)))
+
+
+def test_issue_2_unconverged_epa_says_so_and_answers_a_valid_upper_bound():
+    a, pa, b, pb = CAPSULE_THROUGH_CYLINDER
+    ba = G.collide(b, pb, a, pa, special=False)
+    assert ba.status == "ok" and ba.max_depth == pytest.approx(2.0, abs=TOL)
+    ab = G.collide(a, pa, b, pb, special=False)
+    # Not converged: the status says so (it used to read "ok"), and the depth is EPA's
+    # smallest support distance, an upper bound (>= the true depth) that still
+    # separates the pair; the manifold's points are no deeper than it.
+    assert ab.status in ("ok", "max_iterations")
+    if ab.status == "ok":
+        assert ab.max_depth == pytest.approx(2.0, abs=TOL)
+    assert 2.0 - TOL <= ab.max_depth <= 2.0 + 1e-4
+    p = G.penetration(a, pa, b, pb)
+    assert ab.max_depth <= -p.distance + 1e-12
+
+
+@pytest.mark.xfail(strict=True, reason="EPA does not converge within its cap on this "
+                   "capsule-core / cylinder configuration (issue 2, open)")
+def test_issue_2_epa_converges_for_capsule_through_cylinder():
+    a, pa, b, pb = CAPSULE_THROUGH_CYLINDER
+    ab = G.collide(a, pa, b, pb, special=False)
+    assert ab.status == "ok" and ab.max_depth == pytest.approx(2.0, abs=TOL)
 
 
 @given(a=convex_shapes(), b=convex_shapes(), pa=poses(), pb=poses(), special=st.booleans())
@@ -199,3 +226,23 @@ def test_distance_is_symmetric_and_consistent(a, b, pa, pb):
     np.testing.assert_allclose(ab.point_b - ab.point_a, ab.distance * ab.normal, atol=TOL)
     if ab.distance > SEPARATED:
         np.testing.assert_allclose(np.linalg.norm(ab.point_b - ab.point_a), ab.distance, atol=TOL)
+
+
+def test_issue_2_rounded_boxes_apart_at_a_corner_report_no_contact():
+    # Found by HYPOTHESIS_PROFILE=explore: box-box SAT on rounded cores that are apart
+    # measured their separation along the best axis (a lower bound near a corner), so
+    # it reported 1.06e-2 m of overlap for boxes 1.0e-3 m apart. Cores apart now go to
+    # the exact generic path (dispatch.cpp, sat_exact_below).
+    a = wmo.Box(half_extents=(0.6875, 0.5, 1.0), rounding=0.125)
+    b = wmo.Box(half_extents=(0.75, 0.5, 0.75))
+    pa = wmo.Pose(position=(1.375, 0.0, 0.0), orientation=(0.0, 0.0, -0.3511234415883917, 0.9363291775690445))
+    pb = wmo.Pose(position=(1.59375, -1.9375, 0.0),
+                  orientation=(0.3281825932466517, 0.0, -0.3555311426838727, 0.8751535819910712))
+    d = G.distance(a, pa, b, pb).distance
+    assert 0.9e-3 < d < 1.1e-3
+    for special in (True, False):
+        assert G.collide(a, pa, b, pb, special=special).count == 0
+        assert G.collide(b, pb, a, pa, special=special).count == 0
+        # Within a margin, the speculative depth is minus the exact distance.
+        m = G.collide(a, pa, b, pb, margin=0.01, special=special)
+        assert m.count >= 1 and m.max_depth == pytest.approx(-d, abs=TOL)

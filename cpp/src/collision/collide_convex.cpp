@@ -14,7 +14,8 @@
 //      compared in projection onto the plane perpendicular to N, and each clipped
 //      point's depth is measured along N to the reference plane (clip.h). A segment
 //      reference (capsule side) clips by its two end planes.
-//   4. If clipping leaves nothing (a vertex or a curved contact), or its deepest point
+//   4. Clipped points deeper than the EPA depth are raised to it (see the code).
+//   5. If clipping leaves nothing (a vertex or a curved contact), or its deepest point
 //      is shallower than the EPA depth (an edge-edge contact, where the deepest point
 //      is on the edges, not over a face), the single GJK / EPA point is added, so the
 //      manifold's maximum depth is the EPA depth. Points with depth >= -margin are
@@ -52,9 +53,10 @@ Real plane_alignment(const SupportingFace& f, const Vec3& n_out) {
 }  // namespace
 
 bool collide_convex_convex(const ConvexShape& a, const ConvexShape& b, const Pose& b_in_a,
-                           const CollideSettings& settings, Manifold& m) {
+                           const CollideSettings& settings, Manifold& m, QueryStatus* status) {
   const Real margin = settings.margin;
   const DistanceResult r = penetration_convex_convex(a, b, b_in_a, settings.gjk, settings.epa, margin);
+  if (status) *status = r.status;
   if (!(r.distance <= margin)) return false;  // also rejects NaN
   Vec3 N = r.normal;
   // Normal undefined (exactly touching at one point with no overlap information): the
@@ -82,6 +84,18 @@ bool collide_convex_convex(const ConvexShape& a, const ConvexShape& b, const Pos
     else
       n = clip::clip_features(fb.vertices.data(), fb.count, false, fa.vertices.data(), fa.count, N,
                               0, 0, margin, feat | (1u << 12), pts);
+  }
+  // No point can be deeper than the EPA depth: translating B by depth0 along N makes
+  // the shapes touch, so every point of B is then out of A. A clipped point measured
+  // deeper (to the reference plane, along N) is an artefact of replacing A's surface
+  // by that one plane, which happens for deep overlaps (a capsule through a cylinder:
+  // 8e-5 m too deep at 2 m) and when N is tilted from the reference normal; it is
+  // moved up to depth0, its point on A kept.
+  for (int i = 0; i < n; ++i) {
+    if (pts[i].depth > depth0) {
+      pts[i].depth = depth0;
+      pts[i].point_b = pts[i].point_a - depth0 * N;
+    }
   }
   // Size scale for the tolerance below: the larger bounding half extent.
   const Real size = std::max(a.local_aabb().half_extents().maxCoeff(),

@@ -72,8 +72,10 @@ bool collide_plane_convex(const Plane& a, const ConvexShape& b, const Pose& b_in
 
 /// Generic convex pair: GJK (distance when apart) / EPA (when overlapping) on the cores
 /// plus radii, then a manifold of up to 4 points by clipping the two supporting faces.
+/// `status` (optional) receives GJK / EPA's status: kMaxIterations or kDegenerate mean
+/// the depth is the best valid answer found, not a converged one (gjk.h).
 bool collide_convex_convex(const ConvexShape& a, const ConvexShape& b, const Pose& b_in_a,
-                           const CollideSettings& settings, Manifold& m);
+                           const CollideSettings& settings, Manifold& m, QueryStatus* status = nullptr);
 
 /// Triangle mesh A against convex B: BVH query, one manifold per touching triangle
 /// (child_a = triangle index), with internal-edge correction. Appends to `out`.

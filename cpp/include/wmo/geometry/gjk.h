@@ -1118,8 +1118,14 @@ class Epa {
     // A face farther than a support distance already seen: the polytope is no longer
     // convex (round-off), so its distance is no lower bound (see expand()).
     if (lower.depth > upper_ + tol) return broken_answer(lower.iterations);
-    if (lower.status == QueryStatus::kOk || !(upper_ - lower.depth > tol)) return lower;
-    return upper_answer(lower.status, lower.iterations);
+    if (lower.status == QueryStatus::kOk) return lower;
+    // Stopped early, but the bracket [lower, upper] may already be within tolerance, or
+    // within the resolution limit of a tessellated curved surface (coincident
+    // cylinders: a whole circle of minimal directions, which EPA tessellates until its
+    // cap); the valid upper bound then counts as converged.
+    const Real gap = upper_ - lower.depth;
+    const bool resolved = gap <= tol || gap <= kEpaResolutionRel * scale_;
+    return upper_answer(resolved ? QueryStatus::kOk : lower.status, lower.iterations);
   }
 
   // Stopping tolerance for a face at distance d (relative, or absolute near zero).
