@@ -33,7 +33,7 @@ from ._core import (
     TriangleMesh,
     World,
 )
-from . import geometry
+from . import geometry, scenes
 
 __version__ = "0.1.0"
 
@@ -54,4 +54,5 @@ __all__ = [
     "TriangleMesh",
     "World",
     "geometry",
+    "scenes",
 ]

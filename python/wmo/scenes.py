@@ -1,0 +1,141 @@
+"""The canonical benchmark scenes, built exactly as ``shared/SCENES.md`` specifies, plus
+a few harder ones. Each function returns a new :class:`wmo.World`; keyword arguments
+not named below go to the World (``dt``, ``substeps``, ``iterations``, ...).
+
+Scenes are defined once, here, and shared by the tests, the benchmarks and the
+notebooks. Units: metres, kilograms, seconds; +y is up; every body starts at rest with
+identity orientation unless stated.
+
+- :func:`boxes3000`: Bullet's BenchmarkDemo "3000 boxes" (createTest1): 47 layers of
+  8 x 8 boxes of half-extent 1, mass 2, in free fall onto a ground box; pair friction
+  0.25 (0.5 per body, multiplied), restitution 0, gravity (0, -10, 0).
+- :func:`pyramid`: a 20-layer square pyramid of 2870 unit boxes (half-extent 0.5,
+  mass 1) resting face to face on the ground; pair friction 0.6.
+- :func:`tower`: a column of boxes stacked face to face (30 by default).
+- :func:`mixed_pile`: spheres, capsules and convex hulls dropped onto the ground.
+
+The boxes are sharp (no rounding): Bullet's 0.04 collision margin lies inside its
+boxes and leaves their size unchanged; WMO's speculative contacts play its part.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from . import _core
+
+__all__ = ["boxes3000", "pyramid", "tower", "mixed_pile", "ground_box", "SCENES"]
+
+#: The ground of both canonical scenes: a static box of half-extents 250 x 50 x 250
+#: centred at (0, -50, 0), so its top face is the plane y = 0.
+GROUND_HALF_EXTENTS = (250.0, 50.0, 250.0)
+GROUND_CENTRE = (0.0, -50.0, 0.0)
+GRAVITY = (0.0, -10.0, 0.0)
+
+
+def _world(kwargs: dict[str, Any]) -> _core.World:
+    kwargs.setdefault("gravity", GRAVITY)
+    kwargs.setdefault("dt", 1.0 / 60.0)
+    return _core.World(**kwargs)
+
+
+def ground_box(world: _core.World, friction: float) -> _core.Body:
+    """Adds the canonical static ground box (top face at y = 0)."""
+    return world.add_body(_core.Box(GROUND_HALF_EXTENTS), position=GROUND_CENTRE,
+                          kind="static", friction=friction)
+
+
+def boxes3000(layers: int = 47, grid: int = 8, **world_kwargs: Any) -> _core.World:
+    """Bullet's "3000 boxes": ``layers`` x ``grid`` x ``grid`` dynamic boxes (3008 by
+    default). Layer k, cell (i, j): centre (-12 - 0.35 k + 3 i, 2 + 3 k,
+    -12 - 0.35 k + 3 j); half-extent 1, mass 2 (solid-box inertia 4/3), friction 0.5
+    per body (pair friction 0.25 with the default multiply rule), restitution 0."""
+    if layers < 1 or grid < 1:
+        raise ValueError(f"layers and grid must be >= 1, got layers={layers}, grid={grid}")
+    world = _world(world_kwargs)
+    world.reserve(1 + layers * grid * grid)
+    ground_box(world, friction=0.5)
+    box = _core.Box((1.0, 1.0, 1.0))  # one shape shared by every box
+    for k in range(layers):
+        offset = -12.0 - 0.35 * k
+        y = 2.0 + 3.0 * k
+        for i in range(grid):
+            for j in range(grid):
+                world.add_body(box, position=(offset + 3.0 * i, y, offset + 3.0 * j),
+                               mass=2.0, friction=0.5, restitution=0.0)
+    return world
+
+
+def pyramid(layers: int = 20, **world_kwargs: Any) -> _core.World:
+    """A square pyramid of unit boxes: layer k (0-based) is an n x n grid, n = layers - k,
+    centres (i - (n - 1)/2, 0.5 + k, j - (n - 1)/2); half-extent 0.5, mass 1, per-body
+    friction sqrt(0.6) so that the multiplied pair friction is 0.6 (ground included).
+    2870 boxes for 20 layers; the base rests exactly on the ground."""
+    if layers < 1:
+        raise ValueError(f"layers must be >= 1, got {layers}")
+    world = _world(world_kwargs)
+    mu = math.sqrt(0.6)
+    world.reserve(1 + sum((layers - k) ** 2 for k in range(layers)))
+    ground_box(world, friction=mu)
+    box = _core.Box((0.5, 0.5, 0.5))
+    for k in range(layers):
+        n = layers - k
+        for i in range(n):
+            for j in range(n):
+                world.add_body(box, position=(i - (n - 1) / 2, 0.5 + k, j - (n - 1) / 2),
+                               mass=1.0, friction=mu, restitution=0.0)
+    return world
+
+
+def tower(height: int = 30, half_extent: float = 0.5, friction: float = 0.6,
+          **world_kwargs: Any) -> _core.World:
+    """``height`` boxes of half-extent ``half_extent`` (density 1000) stacked face to
+    face on the ground, the lowest resting on y = 0; pair friction ``friction``."""
+    if height < 1:
+        raise ValueError(f"height must be >= 1, got {height}")
+    world = _world(world_kwargs)
+    mu = math.sqrt(friction)
+    ground_box(world, friction=mu)
+    box = _core.Box((half_extent,) * 3)
+    for k in range(height):
+        world.add_body(box, position=(0.0, half_extent * (2 * k + 1), 0.0), friction=mu)
+    return world
+
+
+def mixed_pile(count: int = 200, seed: int = 0, **world_kwargs: Any) -> _core.World:
+    """``count`` bodies, a third each spheres (radius 0.2..0.5), capsules (radius
+    0.15..0.3, half-height 0.2..0.5) and convex hulls (12 random points on a sphere of
+    radius 0.3..0.6), on a jittered grid of pitch 1.5 m from y = 2 up, with random
+    orientations, falling onto the ground; density 1000, friction 0.5 per body. The
+    layout depends only on ``seed``."""
+    if count < 1:
+        raise ValueError(f"count must be >= 1, got {count}")
+    rng = np.random.default_rng(seed)
+    world = _world(world_kwargs)
+    world.reserve(1 + count)
+    ground_box(world, friction=0.5)
+    side = max(1, int(math.ceil(count ** (1 / 3))))
+    for n in range(count):
+        i, j, k = n % side, (n // side) % side, n // (side * side)
+        pos = (1.5 * (i - (side - 1) / 2) + rng.uniform(-0.2, 0.2),
+               2.0 + 1.5 * k + rng.uniform(0, 0.2),
+               1.5 * (j - (side - 1) / 2) + rng.uniform(-0.2, 0.2))
+        q = rng.normal(size=4)
+        q /= np.linalg.norm(q)
+        kind = n % 3
+        if kind == 0:
+            shape = _core.Sphere(rng.uniform(0.2, 0.5))
+        elif kind == 1:
+            shape = _core.Capsule(rng.uniform(0.15, 0.3), rng.uniform(0.2, 0.5))
+        else:
+            p = rng.normal(size=(12, 3))
+            p *= rng.uniform(0.3, 0.6) / np.linalg.norm(p, axis=1)[:, None]
+            shape = _core.ConvexHull(p)
+        world.add_body(shape, position=pos, orientation=q, friction=0.5)
+    return world
+
+
+#: Scene builders by name, for the command line and the benchmarks.
+SCENES = {"boxes3000": boxes3000, "pyramid": pyramid, "tower": tower, "mixed_pile": mixed_pile}
