@@ -20,13 +20,15 @@ boxes and leaves their size unchanged; WMO's speculative contacts play its part.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from . import _core
 
-__all__ = ["boxes3000", "pyramid", "tower", "mixed_pile", "ground_box", "SCENES"]
+__all__ = ["BoxScene", "boxes3000", "boxes3000_spec", "build", "ground_box", "mixed_pile",
+           "pyramid", "pyramid_spec", "tower", "SCENES", "SPECS"]
 
 #: The ground of both canonical scenes: a static box of half-extents 250 x 50 x 250
 #: centred at (0, -50, 0), so its top face is the plane y = 0.
@@ -47,25 +49,79 @@ def ground_box(world: _core.World, friction: float) -> _core.Body:
                           kind="static", friction=friction)
 
 
+@dataclass(frozen=True)
+class BoxScene:
+    """A scene of dynamic boxes on the canonical ground, as plain arrays, so that the
+    same scene can be built in WMO and in each peer engine (wmo.bench). Rows: one per
+    dynamic box, at rest with identity orientation."""
+    name: str
+    half_extents: np.ndarray  #: (N, 3) m
+    positions: np.ndarray  #: (N, 3) m, box centres
+    masses: np.ndarray  #: (N,) kg
+    friction: float  #: per body (ground included); pair friction = friction ** 2
+    gravity: tuple = GRAVITY
+
+    @property
+    def pair_friction(self) -> float:
+        """The coefficient a contact uses (Bullet's product rule)."""
+        return self.friction ** 2
+
+    def __len__(self) -> int:
+        return len(self.positions)
+
+
+def boxes3000_spec(layers: int = 47, grid: int = 8) -> BoxScene:
+    """Bullet's "3000 boxes" as arrays: layer k, cell (i, j) at (-12 - 0.35 k + 3 i,
+    2 + 3 k, -12 - 0.35 k + 3 j); half-extent 1, mass 2, friction 0.5 per body."""
+    if layers < 1 or grid < 1:
+        raise ValueError(f"layers and grid must be >= 1, got layers={layers}, grid={grid}")
+    k, i, j = np.meshgrid(np.arange(layers), np.arange(grid), np.arange(grid), indexing="ij")
+    k, i, j = k.ravel(), i.ravel(), j.ravel()
+    offset = -12.0 - 0.35 * k
+    pos = np.stack([offset + 3.0 * i, 2.0 + 3.0 * k, offset + 3.0 * j], axis=1)
+    n = len(pos)
+    return BoxScene("boxes3000", np.ones((n, 3)), pos, np.full(n, 2.0), 0.5)
+
+
+def pyramid_spec(layers: int = 20) -> BoxScene:
+    """The pyramid as arrays: layer k is an n x n grid (n = layers - k) at
+    (i - (n - 1)/2, 0.5 + k, j - (n - 1)/2); half-extent 0.5, mass 1, friction
+    sqrt(0.6) per body."""
+    if layers < 1:
+        raise ValueError(f"layers must be >= 1, got {layers}")
+    rows = []
+    for k in range(layers):
+        n = layers - k
+        for i in range(n):
+            for j in range(n):
+                rows.append((i - (n - 1) / 2, 0.5 + k, j - (n - 1) / 2))
+    pos = np.array(rows, dtype=float)
+    n = len(pos)
+    return BoxScene("pyramid", np.full((n, 3), 0.5), pos, np.ones(n), math.sqrt(0.6))
+
+
+def build(spec: BoxScene, **world_kwargs: Any) -> _core.World:
+    """A World holding `spec`: the ground box (row 0) and the dynamic boxes (rows 1..N,
+    in the spec's order). One shape is shared by all boxes of the same size."""
+    world_kwargs.setdefault("gravity", spec.gravity)
+    world = _world(world_kwargs)
+    world.reserve(1 + len(spec))
+    ground_box(world, friction=spec.friction)
+    shapes: dict[tuple, _core.Box] = {}
+    for h, p, m in zip(spec.half_extents, spec.positions, spec.masses):
+        key = tuple(h)
+        if key not in shapes:
+            shapes[key] = _core.Box(key)
+        world.add_body(shapes[key], position=p, mass=float(m), friction=spec.friction, restitution=0.0)
+    return world
+
+
 def boxes3000(layers: int = 47, grid: int = 8, **world_kwargs: Any) -> _core.World:
     """Bullet's "3000 boxes": ``layers`` x ``grid`` x ``grid`` dynamic boxes (3008 by
     default). Layer k, cell (i, j): centre (-12 - 0.35 k + 3 i, 2 + 3 k,
     -12 - 0.35 k + 3 j); half-extent 1, mass 2 (solid-box inertia 4/3), friction 0.5
     per body (pair friction 0.25 with the default multiply rule), restitution 0."""
-    if layers < 1 or grid < 1:
-        raise ValueError(f"layers and grid must be >= 1, got layers={layers}, grid={grid}")
-    world = _world(world_kwargs)
-    world.reserve(1 + layers * grid * grid)
-    ground_box(world, friction=0.5)
-    box = _core.Box((1.0, 1.0, 1.0))  # one shape shared by every box
-    for k in range(layers):
-        offset = -12.0 - 0.35 * k
-        y = 2.0 + 3.0 * k
-        for i in range(grid):
-            for j in range(grid):
-                world.add_body(box, position=(offset + 3.0 * i, y, offset + 3.0 * j),
-                               mass=2.0, friction=0.5, restitution=0.0)
-    return world
+    return build(boxes3000_spec(layers, grid), **world_kwargs)
 
 
 def pyramid(layers: int = 20, **world_kwargs: Any) -> _core.World:
@@ -73,20 +129,7 @@ def pyramid(layers: int = 20, **world_kwargs: Any) -> _core.World:
     centres (i - (n - 1)/2, 0.5 + k, j - (n - 1)/2); half-extent 0.5, mass 1, per-body
     friction sqrt(0.6) so that the multiplied pair friction is 0.6 (ground included).
     2870 boxes for 20 layers; the base rests exactly on the ground."""
-    if layers < 1:
-        raise ValueError(f"layers must be >= 1, got {layers}")
-    world = _world(world_kwargs)
-    mu = math.sqrt(0.6)
-    world.reserve(1 + sum((layers - k) ** 2 for k in range(layers)))
-    ground_box(world, friction=mu)
-    box = _core.Box((0.5, 0.5, 0.5))
-    for k in range(layers):
-        n = layers - k
-        for i in range(n):
-            for j in range(n):
-                world.add_body(box, position=(i - (n - 1) / 2, 0.5 + k, j - (n - 1) / 2),
-                               mass=1.0, friction=mu, restitution=0.0)
-    return world
+    return build(pyramid_spec(layers), **world_kwargs)
 
 
 def tower(height: int = 30, half_extent: float = 0.5, friction: float = 0.6,
@@ -139,3 +182,5 @@ def mixed_pile(count: int = 200, seed: int = 0, **world_kwargs: Any) -> _core.Wo
 
 #: Scene builders by name, for the command line and the benchmarks.
 SCENES = {"boxes3000": boxes3000, "pyramid": pyramid, "tower": tower, "mixed_pile": mixed_pile}
+#: Box scenes as arrays, for building them in the peer engines too.
+SPECS = {"boxes3000": boxes3000_spec, "pyramid": pyramid_spec}

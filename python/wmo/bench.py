@@ -1,0 +1,284 @@
+"""Scene benchmarks: a canonical scene stepped in WMO and in its peers (PyBullet, MuJoCo)
+in the same run, with the same dt, solver iterations and sleeping, per SCENES.md.
+
+Each engine is timed per step (wall clock around the engine's own step call only);
+contact points, awake bodies and the deepest penetration are read after the step,
+outside the timing. Results: one CSV row per engine and step, PNG plots of steps per
+second and contact points over simulated time (the thesis's FPS figures), and a summary
+with median step times and the ratios to WMO.
+
+Settings that cannot be made identical are stated in the summary: WMO's soft-step
+solver runs ``substeps`` substeps of one velocity iteration each plus a relax pass
+(Box2D v3's scheme), where Bullet's sequential impulse solver runs ``iterations``
+passes once per step; MuJoCo solves its soft-constraint problem with PGS capped at
+``iterations`` iterations. Bullet's friction rule is the product of the two bodies'
+coefficients, MuJoCo's the maximum, so MuJoCo's geoms get the pair friction itself.
+
+Peers are optional imports: one that is not installed is reported and skipped.
+"""
+from __future__ import annotations
+
+import csv
+import math
+import statistics
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Iterable
+
+import numpy as np
+
+from . import scenes as _scenes
+
+ENGINES = ("wmo", "pybullet", "mujoco")
+
+
+@dataclass
+class StepRecord:
+    step: int  #: 1-based
+    seconds: float  #: wall time of this step
+    contacts: int  #: contact points after the step
+    awake: int  #: awake dynamic bodies after the step
+    max_penetration: float  #: deepest penetration after the step (m, >= 0)
+
+
+@dataclass
+class EngineRun:
+    engine: str
+    build: str  #: which build of the engine (version string)
+    settings: str  #: the settings it ran with, in words
+    records: list[StepRecord] = field(default_factory=list)
+
+    def step_times(self) -> list[float]:
+        return [r.seconds for r in self.records]
+
+    @property
+    def median_ms(self) -> float:
+        return 1e3 * statistics.median(self.step_times())
+
+
+# ---- WMO ------------------------------------------------------------------------------
+
+def run_wmo(spec: _scenes.BoxScene, steps: int, dt: float, iterations: int, substeps: int,
+            sleeping: bool) -> EngineRun:
+    if sleeping:
+        raise ValueError("sleeping: WMO has no sleeping yet (issue 3); run with sleeping off")
+    world = _scenes.build(spec, dt=dt, substeps=substeps, iterations=1)
+    run = EngineRun("wmo", f"wmo {_version()}",
+                    f"dt {dt:g}, {substeps} substeps x 1 iteration + 1 relax, sleeping off")
+    n_dyn = len(spec)
+    for k in range(steps):
+        t0 = time.perf_counter()
+        world.step()
+        t1 = time.perf_counter()
+        run.records.append(StepRecord(k + 1, t1 - t0, world.contact_count, n_dyn,
+                                      float(world.max_penetration)))
+    return run
+
+
+def _version() -> str:
+    from . import __version__
+    return __version__
+
+
+# ---- PyBullet --------------------------------------------------------------------------
+
+def run_pybullet(spec: _scenes.BoxScene, steps: int, dt: float, iterations: int, substeps: int,
+                 sleeping: bool) -> EngineRun:
+    import pybullet as pb  # optional peer
+
+    cid = pb.connect(pb.DIRECT)
+    try:
+        pb.setGravity(*spec.gravity, physicsClientId=cid)
+        pb.setPhysicsEngineParameter(fixedTimeStep=dt, numSolverIterations=iterations, numSubSteps=0,
+                                     deterministicOverlappingPairs=1, physicsClientId=cid)
+        ground = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=list(_scenes.GROUND_HALF_EXTENTS),
+                                         physicsClientId=cid)
+        # Maximal coordinates: btRigidBody, as Bullet's BenchmarkDemo uses (PyBullet's
+        # default, btMultiBody, runs the Featherstone solver: 10-20x slower here).
+        g = pb.createMultiBody(0, ground, -1, list(_scenes.GROUND_CENTRE), useMaximalCoordinates=1,
+                               physicsClientId=cid)
+        pb.changeDynamics(g, -1, lateralFriction=spec.friction, restitution=0, physicsClientId=cid)
+        shapes: dict[tuple, int] = {}
+        ids = []
+        for h, p, m in zip(spec.half_extents, spec.positions, spec.masses):
+            key = tuple(h)
+            if key not in shapes:
+                shapes[key] = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=list(key), physicsClientId=cid)
+            b = pb.createMultiBody(float(m), shapes[key], -1, list(p), useMaximalCoordinates=1,
+                                   physicsClientId=cid)
+            pb.changeDynamics(b, -1, lateralFriction=spec.friction, restitution=0, linearDamping=0,
+                              angularDamping=0, physicsClientId=cid)
+            if not sleeping:
+                pb.changeDynamics(b, -1, activationState=pb.ACTIVATION_STATE_DISABLE_SLEEPING,
+                                  physicsClientId=cid)
+            ids.append(b)
+        run = EngineRun("pybullet", f"pybullet {pb.getAPIVersion()} (PyPI wheel, Bullet 3)",
+                        f"dt {dt:g}, {iterations} iterations, sleeping {'on' if sleeping else 'off'}")
+        for k in range(steps):
+            t0 = time.perf_counter()
+            pb.stepSimulation(physicsClientId=cid)
+            t1 = time.perf_counter()
+            # getContactPoints returns uninitialised rows (link indices other than -1,
+            # body ids out of range, NaN positions) once a scene holds tens of thousands
+            # of points (6392 of 95322 on the pyramid's first step); only well-formed
+            # rows (base links of two distinct bodies, finite values) are counted.
+            cps = [c for c in pb.getContactPoints(physicsClientId=cid)
+                   if c[3] == -1 and c[4] == -1 and c[1] != c[2] and math.isfinite(c[8])
+                   and all(map(math.isfinite, c[5])) and all(map(math.isfinite, c[6]))]
+            pen = max([-c[8] for c in cps] + [0.0])
+            awake = len(ids)
+            if sleeping:
+                awake = sum(1 for b in ids
+                            if pb.getDynamicsInfo(b, -1, physicsClientId=cid)[-1] != pb.ACTIVATION_STATE_SLEEP)
+            run.records.append(StepRecord(k + 1, t1 - t0, len(cps), awake, pen))
+        return run
+    finally:
+        pb.disconnect(physicsClientId=cid)
+
+
+# ---- MuJoCo ----------------------------------------------------------------------------
+
+def mujoco_xml(spec: _scenes.BoxScene, dt: float, iterations: int) -> str:
+    """MJCF of the scene: gravity along -y, free boxes, the ground box, pair friction on
+    every geom (MuJoCo takes the maximum of the two), PGS solver."""
+    mu = spec.pair_friction
+    gx, gy, gz = spec.gravity
+    parts = [f'<mujoco><option timestep="{dt!r}" gravity="{gx} {gy} {gz}" iterations="{iterations}" '
+             f'solver="PGS"/><worldbody>',
+             f'<geom type="box" size="{" ".join(map(str, _scenes.GROUND_HALF_EXTENTS))}" '
+             f'pos="{" ".join(map(str, _scenes.GROUND_CENTRE))}" friction="{mu} 0 0"/>']
+    for n, (h, p, m) in enumerate(zip(spec.half_extents, spec.positions, spec.masses)):
+        px, py, pz = map(float, p)
+        hx, hy, hz = map(float, h)
+        parts.append(f'<body pos="{px!r} {py!r} {pz!r}"><freejoint/>'
+                     f'<geom type="box" size="{hx!r} {hy!r} {hz!r}" mass="{float(m)!r}" friction="{mu} 0 0"/></body>')
+    parts.append("</worldbody></mujoco>")
+    return "".join(parts)
+
+
+def run_mujoco(spec: _scenes.BoxScene, steps: int, dt: float, iterations: int, substeps: int,
+               sleeping: bool) -> EngineRun:
+    import mujoco  # optional peer
+
+    model = mujoco.MjModel.from_xml_string(mujoco_xml(spec, dt, iterations))
+    data = mujoco.MjData(model)
+    run = EngineRun("mujoco", f"mujoco {mujoco.__version__} (PyPI)",
+                    f"dt {dt:g}, PGS {iterations} iterations, no sleeping (MuJoCo has none)")
+    for k in range(steps):
+        t0 = time.perf_counter()
+        mujoco.mj_step(model, data)
+        t1 = time.perf_counter()
+        n = data.ncon
+        pen = float(max(0.0, -data.contact.dist[:n].min())) if n else 0.0
+        run.records.append(StepRecord(k + 1, t1 - t0, int(n), len(spec), pen))
+    return run
+
+
+RUNNERS: dict[str, Callable[..., EngineRun]] = {"wmo": run_wmo, "pybullet": run_pybullet, "mujoco": run_mujoco}
+
+
+# ---- Driver ----------------------------------------------------------------------------
+
+@dataclass
+class BenchResult:
+    scene: str
+    runs: list[EngineRun]
+    skipped: dict[str, str]
+
+    def summary(self) -> str:
+        steps = len(self.runs[0].records) if self.runs else 0
+        lines = [f"scene {self.scene}: {steps} steps, single thread"]
+        base = next((r for r in self.runs if r.engine == "wmo"), None)
+        lines.append(f"{'engine':10s} {'median ms':>10s} {'steps/s':>9s} {'max contacts':>13s} "
+                     f"{'deepest pen. m':>15s}  ratio to wmo   build / settings")
+        for r in self.runs:
+            ratio = (r.median_ms / base.median_ms) if base else math.nan
+            lines.append(f"{r.engine:10s} {r.median_ms:10.2f} {1e3 / r.median_ms:9.1f} "
+                         f"{max(x.contacts for x in r.records):13d} "
+                         f"{max(x.max_penetration for x in r.records):15.3f}  {ratio:11.2f}   "
+                         f"{r.build}; {r.settings}")
+        for name, why in self.skipped.items():
+            lines.append(f"{name:10s} skipped: {why}")
+        return "\n".join(lines)
+
+
+def run_bench(scene: str = "boxes3000", steps: int = 600, engines: Iterable[str] = ENGINES,
+              dt: float = 1 / 60, iterations: int = 10, substeps: int = 4, sleeping: bool = False,
+              repeats: int = 1) -> BenchResult:
+    """Runs `scene` for `steps` steps in each engine (WMO first); with ``repeats`` > 1 the
+    run of each engine is repeated and the one with the median of medians is kept."""
+    if scene not in _scenes.SPECS:
+        raise ValueError(f"scene must be one of {sorted(_scenes.SPECS)}, got {scene!r}")
+    if steps < 1:
+        raise ValueError(f"steps must be >= 1, got {steps}")
+    spec = _scenes.SPECS[scene]()
+    runs, skipped = [], {}
+    for name in engines:
+        if name not in RUNNERS:
+            raise ValueError(f"engine must be one of {list(RUNNERS)}, got {name!r}")
+        try:
+            tries = [RUNNERS[name](spec, steps, dt, iterations, substeps, sleeping) for _ in range(repeats)]
+        except ImportError as e:
+            skipped[name] = f"not installed ({e})"
+            continue
+        except ValueError as e:
+            skipped[name] = str(e)
+            continue
+        tries.sort(key=lambda r: r.median_ms)
+        runs.append(tries[len(tries) // 2])
+    return BenchResult(scene, runs, skipped)
+
+
+def write_csv(result: BenchResult, path: Path, dt: float) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["scene", "engine", "step", "sim_time_s", "step_seconds", "contact_points", "awake_bodies",
+                    "max_penetration_m"])
+        for r in result.runs:
+            for x in r.records:
+                w.writerow([result.scene, r.engine, x.step, "%.9g" % (x.step * dt),
+                            "%.9f" % x.seconds, x.contacts, x.awake, "%.6g" % x.max_penetration])
+
+
+def plot(result: BenchResult, dt: float, out_dir: Path) -> list[Path]:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    paths = []
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    for r in result.runs:
+        t = np.array([x.step for x in r.records]) * dt
+        sps = 1.0 / np.maximum(np.array(r.step_times()), 1e-9)
+        k = min(15, len(sps))  # a moving median over 15 steps shows the trend through the noise
+        smooth = np.array([np.median(sps[max(0, i - k + 1):i + 1]) for i in range(len(sps))])
+        ax.plot(t, smooth, label=f"{r.engine} (median {r.median_ms:.1f} ms/step)")
+    ax.set_xlabel("simulated time (s)")
+    ax.set_ylabel("steps per second (moving median of 15)")
+    ax.set_yscale("log")
+    ax.set_title(f"{result.scene}: simulation rate")
+    ax.legend()
+    ax.grid(True, which="both", alpha=0.3)
+    p = out_dir / f"{result.scene}_steps_per_second.png"
+    fig.tight_layout()
+    fig.savefig(p, dpi=120)
+    plt.close(fig)
+    paths.append(p)
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    for r in result.runs:
+        t = np.array([x.step for x in r.records]) * dt
+        ax.plot(t, [x.contacts for x in r.records], label=r.engine)
+    ax.set_xlabel("simulated time (s)")
+    ax.set_ylabel("contact points")
+    ax.set_title(f"{result.scene}: contact points")
+    ax.legend()
+    ax.grid(True, alpha=0.3)
+    p = out_dir / f"{result.scene}_contacts.png"
+    fig.tight_layout()
+    fig.savefig(p, dpi=120)
+    plt.close(fig)
+    paths.append(p)
+    return paths
