@@ -107,6 +107,14 @@ the world's state arrays (it changes when another body is removed).
             world_of(b).set_angular_velocity(b.id, to_vec3(w, "angular_velocity"));
           },
           "Angular velocity (rad/s, world); a copy. Setting it validates the value.")
+      .def_property_readonly(
+          "sleeping",
+          [](const PyBody& b) {
+            World& w = world_of(b);
+            const int i = w.index_of(b.id);
+            return w.kind(i) == BodyKind::kDynamic && !w.is_awake(i);
+          },
+          "True while the body's island sleeps.")
       .def("__eq__", [](const PyBody& a, const PyBody& b) { return a.world.is(b.world) && a.id == b.id; })
       .def("__hash__", [](const PyBody& b) { return py::hash(py::make_tuple(b.id.slot, b.id.generation)); })
       .def("__repr__", [](const PyBody& b) {
@@ -134,6 +142,12 @@ speculative_distance : contacts are made this close before touching (m, default 
 friction_combine, restitution_combine : 'multiply' (default for friction, Bullet's rule),
     'geometric_mean', 'max' (default for restitution), 'min' or 'average'.
 gyroscopic : integrate the gyroscopic term (default False).
+sleeping : put resting islands to sleep (default True): an island whose bodies all move
+    slower than sleep_linear_threshold (m/s, default 0.05) and sleep_angular_threshold
+    (rad/s, default 2 deg/s) for time_to_sleep (s, default 0.5) sleeps and costs nothing
+    until an awake or moving body overlaps it, a force, impulse or setter reaches one of
+    its bodies, its velocities or pose are written in the state arrays, or one of its
+    bodies is removed.
 
 State arrays (world.positions, orientations, linear_velocities, angular_velocities)
 are zero-copy, writable views; see the module notes on their lifetime.
@@ -141,7 +155,8 @@ are zero-copy, writable views; see the module notes on their lifetime.
       .def(py::init([](py::object gravity, double dt, int substeps, int iterations, int relax_iterations,
                        double contact_hertz, double contact_damping_ratio, double contact_push_max,
                        double restitution_threshold, double speculative_distance, const std::string& friction_combine,
-                       const std::string& restitution_combine, bool gyroscopic) {
+                       const std::string& restitution_combine, bool gyroscopic, bool sleeping,
+                       double sleep_linear_threshold, double sleep_angular_threshold, double time_to_sleep) {
              WorldSettings s;
              s.gravity = gravity.is_none() ? Vec3(0, -9.81, 0) : to_vec3(gravity, "gravity");
              s.dt = dt;
@@ -156,6 +171,10 @@ are zero-copy, writable views; see the module notes on their lifetime.
              s.friction_combine = combine_rule_from_string(friction_combine);
              s.restitution_combine = combine_rule_from_string(restitution_combine);
              s.gyroscopic = gyroscopic;
+             s.enable_sleep = sleeping;
+             s.sleep_linear_threshold = sleep_linear_threshold;
+             s.sleep_angular_threshold = sleep_angular_threshold;
+             s.time_to_sleep = time_to_sleep;
              return std::make_unique<World>(s);
            }),
            py::arg("gravity") = py::none(), py::arg("dt") = 1.0 / 60, py::arg("substeps") = 4,
@@ -163,7 +182,8 @@ are zero-copy, writable views; see the module notes on their lifetime.
            py::arg("contact_damping_ratio") = 10.0, py::arg("contact_push_max") = 3.0,
            py::arg("restitution_threshold") = 1.0, py::arg("speculative_distance") = 0.04,
            py::arg("friction_combine") = "multiply", py::arg("restitution_combine") = "max",
-           py::arg("gyroscopic") = false)
+           py::arg("gyroscopic") = false, py::arg("sleeping") = true, py::arg("sleep_linear_threshold") = 0.05,
+           py::arg("sleep_angular_threshold") = 2 * kPi / 180, py::arg("time_to_sleep") = 0.5)
       .def(
           "add_body",
           [](py::object self, std::shared_ptr<Shape> shape, py::object position, py::object orientation,
@@ -233,6 +253,21 @@ field; the world is unchanged. Existing state views may detach (see World).
       .def_property_readonly("substeps", [](const World& w) { return w.settings().substeps; })
       .def_property_readonly("iterations", [](const World& w) { return w.settings().iterations; })
       .def_property_readonly("step_count", &World::step_count)
+      .def_property_readonly("sleeping", [](const World& w) { return w.settings().enable_sleep; },
+                             "Whether resting islands are put to sleep.")
+      .def_property_readonly("awake_count", &World::awake_dynamic_count, "Number of awake dynamic bodies.")
+      .def_property_readonly(
+          "awake",
+          [](const World& w) {
+            py::array_t<bool> a(w.body_count());
+            auto m = a.mutable_unchecked<1>();
+            for (int i = 0; i < w.body_count(); ++i) m(i) = w.is_awake(i);
+            return a;
+          },
+          "(N,) bool copy: awake dynamic and all kinematic bodies are True, static and sleeping False.")
+      .def(
+          "wake", [](World& w, const PyBody& b) { w.wake(b.id); }, py::arg("body"),
+          "Wakes the body's island (nothing happens to an awake, static or kinematic body).")
       .def(
           "apply_impulse",
           [](World& w, const PyBody& b, py::object impulse, py::object point) {

@@ -61,17 +61,15 @@ class EngineRun:
 
 def run_wmo(spec: _scenes.BoxScene, steps: int, dt: float, iterations: int, substeps: int,
             sleeping: bool) -> EngineRun:
-    if sleeping:
-        raise ValueError("sleeping: WMO has no sleeping yet (issue 3); run with sleeping off")
-    world = _scenes.build(spec, dt=dt, substeps=substeps, iterations=1)
+    world = _scenes.build(spec, dt=dt, substeps=substeps, iterations=1, sleeping=sleeping)
     run = EngineRun("wmo", f"wmo {_version()}",
-                    f"dt {dt:g}, {substeps} substeps x 1 iteration + 1 relax, sleeping off")
-    n_dyn = len(spec)
+                    f"dt {dt:g}, {substeps} substeps x 1 iteration + 1 relax, "
+                    f"sleeping {'on' if sleeping else 'off'}")
     for k in range(steps):
         t0 = time.perf_counter()
         world.step()
         t1 = time.perf_counter()
-        run.records.append(StepRecord(k + 1, t1 - t0, world.contact_count, n_dyn,
+        run.records.append(StepRecord(k + 1, t1 - t0, world.contact_count, world.awake_count,
                                       float(world.max_penetration)))
     return run
 

@@ -1,7 +1,7 @@
 """The ``wmo`` command line.
 
     wmo bench SCENE [--steps 600] [--engines wmo,pybullet,mujoco] [--out DIR]
-                    [--iterations 10] [--substeps 4] [--dt 1/60] [--repeats 1]
+                    [--iterations 10] [--substeps 4] [--dt 1/60] [--repeats 1] [--sleeping]
 
 ``bench`` steps a canonical scene (boxes3000 or pyramid, shared/SCENES.md) in WMO and in
 its peers in the same run, prints a summary with the ratios, and writes
@@ -43,6 +43,8 @@ def main(argv: list[str] | None = None) -> int:
     b.add_argument("--substeps", type=int, default=4, help="WMO soft-step substeps (default 4)")
     b.add_argument("--dt", type=_dt, default=1 / 60)
     b.add_argument("--repeats", type=int, default=1, help="runs per engine; the median run is kept")
+    b.add_argument("--sleeping", action="store_true",
+                   help="sleeping on (default off: the throughput figure of SCENES.md)")
     args = ap.parse_args(argv)
 
     if args.command == "bench":
@@ -50,7 +52,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             result = bench.run_bench(args.scene, steps=args.steps, engines=engines, dt=args.dt,
                                      iterations=args.iterations, substeps=args.substeps,
-                                     repeats=args.repeats)
+                                     repeats=args.repeats, sleeping=args.sleeping)
         except ValueError as e:
             print(f"wmo bench: {e}", file=sys.stderr)
             return 2

@@ -24,8 +24,9 @@ def snapshot(world):
                                   world.linear_velocities, world.angular_velocities)]
 
 
-def test_issue_example_box_lands_on_the_ground():
-    world, b = ground_and_box()
+@pytest.mark.parametrize("sleeping", [True, False])
+def test_issue_example_box_lands_on_the_ground(sleeping):
+    world, b = ground_and_box(sleeping=sleeping)
     world.step(600)
     p = world.positions[b.index]
     assert p.shape == (3,)
@@ -33,7 +34,12 @@ def test_issue_example_box_lands_on_the_ground():
     # (load / stiffness: well under 1 mm at 30 Hz) and above the speculative margin.
     assert abs(p[1] - 1.0) < 1e-3
     assert np.linalg.norm(world.linear_velocities[b.index]) < 1e-3
-    assert world.contact_count == 4  # a face on a face: a 4-point manifold
+    if sleeping:
+        assert b.sleeping and world.awake_count == 0 and world.contact_count == 0
+        assert not world.awake[b.index]
+    else:
+        assert world.contact_count == 4  # a face on a face: a 4-point manifold
+        assert world.awake_count == 1
 
 
 def test_state_arrays_are_views_of_the_world():
@@ -173,7 +179,7 @@ def test_nan_written_into_a_view_raises_at_step_and_nothing_moves():
 
 
 def test_contacts_and_profile():
-    world, b = ground_and_box()
+    world, b = ground_and_box(sleeping=False)
     world.step(120)
     c = world.contacts
     m = world.contact_count
@@ -184,7 +190,8 @@ def test_contacts_and_profile():
     assert c["normal_impulse"].sum() * 4 == pytest.approx(2.0 * 10 / 60, rel=1e-3)
     prof = world.profile
     assert list(prof) == ["update_broadphase", "find_pairs", "narrowphase", "solve",
-                          "restitution", "store_impulses"]
+                          "restitution", "store_impulses", "update_sleep"]
+    assert prof["update_sleep"]["runs"] == 0  # sleeping off: the stage never ran
     assert prof["solve"]["count"] == m
     assert prof["restitution"]["runs"] == 0  # nothing bounces: the stage never ran
     assert all(v["seconds"] >= 0 and v["total_seconds"] >= v["seconds"] for v in prof.values())
@@ -221,3 +228,29 @@ def test_step_releases_the_gil():
     # it also runs in the middle fifth of a step of over 100 ms.
     lo, hi = t0 + 0.4 * (t1 - t0), t0 + 0.6 * (t1 - t0)
     assert any(lo <= s <= hi for s in stamps)
+
+
+def test_sleeping_island_wakes_on_impulse_and_on_a_written_velocity():
+    world, b = ground_and_box()
+    top = world.add_body(wmo.Box((1, 1, 1)), position=(0, 3, 0), mass=2.0)
+    world.step(120)
+    assert b.sleeping and top.sleeping and world.awake_count == 0
+    assert world.profile["narrowphase"]["count"] == 0  # asleep: no contact work
+    world.apply_impulse(b, (1.0, 0, 0), b.position)
+    assert not b.sleeping and not top.sleeping  # the whole island
+    world.step(240)
+    assert world.awake_count == 0
+    world.linear_velocities[top.index] = (0, 3.0, 0)  # written into the view
+    world.step()
+    assert world.awake_count == 2 and top.position[1] > 3.0
+    world.step(300)
+    assert world.awake_count == 0
+    world.wake(top)
+    assert world.awake_count == 2
+
+
+def test_bad_sleep_settings_raise():
+    with pytest.raises(ValueError, match="time_to_sleep"):
+        wmo.World(time_to_sleep=0.0)
+    with pytest.raises(ValueError, match="sleep_linear_threshold"):
+        wmo.World(sleep_linear_threshold=-1.0)

@@ -11,7 +11,7 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-enum Stage { kUpdateBroadphase = 0, kFindPairs, kNarrowphase, kSolve, kRestitution, kStoreImpulses };
+enum Stage { kUpdateBroadphase = 0, kFindPairs, kNarrowphase, kSolve, kRestitution, kStoreImpulses, kUpdateSleep };
 
 /// Times one stage into the profile (RAII), with the stage's work count.
 class StageTimer {
@@ -102,6 +102,9 @@ void validate_world_settings(const WorldSettings& s) {
   require_non_negative("restitution_threshold", s.solver.restitution_threshold);
   require_non_negative("speculative_distance", s.speculative_distance);
   require_non_negative("aabb_margin", s.aabb_margin);
+  require_non_negative("sleep_linear_threshold", s.sleep_linear_threshold);
+  require_non_negative("sleep_angular_threshold", s.sleep_angular_threshold);
+  require_positive("time_to_sleep", s.time_to_sleep);
 }
 
 World::World(const WorldSettings& settings) : settings_(settings) {
@@ -125,6 +128,9 @@ void World::set_settings(const WorldSettings& s) {
     broadphase_ = std::move(bp);
   }
   settings_ = s;
+  if (!settings_.enable_sleep)
+    for (int k = 0; k < static_cast<int>(islands_.size()); ++k)
+      if (!islands_[k].empty()) wake_island(k);
 }
 
 int World::require(BodyId id, const char* what) const {
@@ -185,12 +191,20 @@ BodyId World::add_body(const BodyDef& def) {
   torques_.push_back(Vec3::Zero());
   proxies_.push_back(proxy);
   slot_of_.push_back(slot);
+  awake_.push_back(def.kind != BodyKind::kStatic);
+  sleep_time_.push_back(0);
+  sleep_island_.push_back(-1);
+  sleep_position_.push_back(def.position);
+  sleep_orientation_.push_back(q);
   // Dense indices of the last step's constraints stay valid (the new row is at the end).
   return BodyId{slot, slots_[slot].generation};
 }
 
 void World::remove_body(BodyId id) {
-  const int i = require(id, "remove_body");
+  int i = require(id, "remove_body");
+  // Bodies resting on a sleeping body must not float once it is gone.
+  if (sleep_island_[i] >= 0) wake_island(sleep_island_[i]);
+  i = index_of(id);
   broadphase_->destroy_proxy(proxies_[i]);
   // Forget cached contacts of this slot: a later body in the same slot must not inherit
   // its impulses.
@@ -217,6 +231,11 @@ void World::remove_body(BodyId id) {
   swap_remove(torques_, i);
   swap_remove(proxies_, i);
   swap_remove(slot_of_, i);
+  swap_remove(awake_, i);
+  swap_remove(sleep_time_, i);
+  swap_remove(sleep_island_, i);
+  swap_remove(sleep_position_, i);
+  swap_remove(sleep_orientation_, i);
   slots_[id.slot].index = -1;
   ++slots_[id.slot].generation;
   free_slots_.push_back(id.slot);
@@ -236,23 +255,27 @@ void World::set_position(BodyId id, const Vec3& position) {
   const int i = require(id, "set_position");
   require_finite("position", position);
   positions_[i] = position;
+  wake_row(i);
 }
 
 void World::set_orientation(BodyId id, const Quat& orientation) {
   const int i = require(id, "set_orientation");
   orientations_[i] = Pose::checked(Vec3::Zero(), orientation, "body").rotation;
+  wake_row(i);
 }
 
 void World::set_linear_velocity(BodyId id, const Vec3& v) {
   const int i = require(id, "set_linear_velocity");
   require_finite("linear_velocity", v);
   linear_velocities_[i] = v;
+  wake_row(i);
 }
 
 void World::set_angular_velocity(BodyId id, const Vec3& w) {
   const int i = require(id, "set_angular_velocity");
   require_finite("angular_velocity", w);
   angular_velocities_[i] = w;
+  wake_row(i);
 }
 
 void World::apply_impulse(BodyId id, const Vec3& impulse, const Vec3& world_point) {
@@ -264,6 +287,7 @@ void World::apply_impulse(BodyId id, const Vec3& impulse, const Vec3& world_poin
   linear_velocities_[i] += m.inv_mass * impulse;
   const Mat3 inv_i = world_inv_inertia(orientations_[i], m.inv_inertia_local);
   angular_velocities_[i] += inv_i * (world_point - world_com(i)).cross(impulse);
+  wake_row(i);
 }
 
 void World::apply_force(BodyId id, const Vec3& force, const Vec3& world_point) {
@@ -273,6 +297,7 @@ void World::apply_force(BodyId id, const Vec3& force, const Vec3& world_point) {
   if (kinds_[i] != BodyKind::kDynamic) return;
   forces_[i] += force;
   torques_[i] += (world_point - world_com(i)).cross(force);
+  wake_row(i);
 }
 
 void World::apply_torque(BodyId id, const Vec3& torque) {
@@ -280,6 +305,109 @@ void World::apply_torque(BodyId id, const Vec3& torque) {
   require_finite("torque", torque);
   if (kinds_[i] != BodyKind::kDynamic) return;
   torques_[i] += torque;
+  wake_row(i);
+}
+
+// ---- Sleeping ----------------------------------------------------------------------
+
+int World::awake_dynamic_count() const {
+  int n = 0;
+  for (int i = 0; i < body_count(); ++i) n += kinds_[i] == BodyKind::kDynamic && awake_[i];
+  return n;
+}
+
+void World::wake(BodyId id) { wake_row(require(id, "wake")); }
+
+void World::wake_row(int i) {
+  if (sleep_island_[i] >= 0) wake_island(sleep_island_[i]);
+}
+
+void World::wake_island(int island) {
+  for (const std::int32_t slot : islands_[island]) {
+    const int i = slots_[slot].index;
+    if (i < 0) continue;  // removed while asleep (remove_body wakes first; defensive)
+    awake_[i] = 1;
+    sleep_time_[i] = 0;
+    sleep_island_[i] = -1;
+  }
+  islands_[island].clear();
+  free_islands_.push_back(island);
+}
+
+// Moves this step and can wake what it touches: an awake dynamic body, or a kinematic
+// body with a velocity (a kinematic body at rest leaves a sleeping pile asleep).
+bool World::moving(int i) const {
+  if (kinds_[i] == BodyKind::kDynamic) return awake_[i] != 0;
+  if (kinds_[i] == BodyKind::kKinematic)
+    return !linear_velocities_[i].isZero(0) || !angular_velocities_[i].isZero(0);
+  return false;
+}
+
+// Islands by union-find over this step's contacts between awake dynamic bodies (static
+// and kinematic bodies join no island, as in Box2D: they would merge everything resting
+// on the ground). Sleep timers advance for bodies below both thresholds and reset
+// otherwise (and for bodies touching a moving kinematic body); an island sleeps when
+// its smallest timer reaches time_to_sleep.
+void World::update_sleep() {
+  const int n = body_count();
+  const Real dt = settings_.dt;
+  const Real lin2 = settings_.sleep_linear_threshold * settings_.sleep_linear_threshold;
+  const Real ang2 = settings_.sleep_angular_threshold * settings_.sleep_angular_threshold;
+  island_parent_.resize(n);
+  for (int i = 0; i < n; ++i) {
+    island_parent_[i] = i;
+    if (kinds_[i] != BodyKind::kDynamic || !awake_[i]) continue;
+    const bool slow = linear_velocities_[i].squaredNorm() <= lin2 && angular_velocities_[i].squaredNorm() <= ang2;
+    sleep_time_[i] = slow ? sleep_time_[i] + dt : 0;
+  }
+  auto find = [&](int i) {
+    while (island_parent_[i] != i) i = island_parent_[i] = island_parent_[island_parent_[i]];
+    return i;
+  };
+  auto is_dyn = [&](int i) { return kinds_[i] == BodyKind::kDynamic; };
+  for (const ContactConstraint& c : constraints_) {
+    const int a = c.body_a, b = c.body_b;
+    if (is_dyn(a) && is_dyn(b)) {
+      const int ra = find(a), rb = find(b);
+      if (ra != rb) island_parent_[std::max(ra, rb)] = std::min(ra, rb);  // smallest row is the root
+    } else if (kinds_[a] == BodyKind::kKinematic && moving(a)) {
+      sleep_time_[b] = 0;
+    } else if (kinds_[b] == BodyKind::kKinematic && moving(b)) {
+      sleep_time_[a] = 0;
+    }
+  }
+  // Smallest timer per root, then the roots that may sleep.
+  std::vector<Real>& min_time = sleep_scratch_;
+  min_time.assign(n, kInf);
+  for (int i = 0; i < n; ++i)
+    if (is_dyn(i) && awake_[i]) {
+      const int r = find(i);
+      min_time[r] = std::min(min_time[r], sleep_time_[i]);
+    }
+  std::vector<std::int32_t>& island_of_root = island_of_root_;
+  island_of_root.assign(n, -1);
+  for (int i = 0; i < n; ++i) {
+    if (!is_dyn(i) || !awake_[i]) continue;
+    const int r = find(i);
+    if (!(min_time[r] >= settings_.time_to_sleep)) continue;
+    if (island_of_root[r] < 0) {
+      if (!free_islands_.empty()) {
+        island_of_root[r] = free_islands_.back();
+        free_islands_.pop_back();
+      } else {
+        island_of_root[r] = static_cast<std::int32_t>(islands_.size());
+        islands_.emplace_back();
+      }
+    }
+    const int island = island_of_root[r];
+    islands_[island].push_back(slot_of_[i]);
+    awake_[i] = 0;
+    sleep_island_[i] = island;
+    linear_velocities_[i].setZero();
+    angular_velocities_[i].setZero();
+    sleep_position_[i] = positions_[i];
+    sleep_orientation_[i] = orientations_[i];
+  }
 }
 
 void World::validate_state() {
@@ -299,6 +427,14 @@ void World::validate_state() {
       fail("orientations", i, "must be a unit quaternion, got norm " + std::to_string(qn));
   }
   for (int i = 0; i < body_count(); ++i) orientations_[i].normalize();  // within tolerance: exact unit
+  // A sleeping body has zero velocity and the pose it fell asleep at: anything else was
+  // written by the user, and wakes its island.
+  for (int i = 0; i < body_count(); ++i) {
+    if (sleep_island_[i] < 0) continue;
+    if (!linear_velocities_[i].isZero(0) || !angular_velocities_[i].isZero(0) ||
+        positions_[i] != sleep_position_[i] || !(orientations_[i].coeffs() == sleep_orientation_[i].coeffs()))
+      wake_island(sleep_island_[i]);
+  }
 }
 
 void World::step(int n) {
@@ -311,7 +447,7 @@ void World::step(int n) {
 void World::integrate_velocities(Real h) {
   const int n = body_count();
   for (int i = 0; i < n; ++i) {
-    if (kinds_[i] != BodyKind::kDynamic) continue;
+    if (kinds_[i] != BodyKind::kDynamic || !awake_[i]) continue;  // static, kinematic, sleeping
     BodyState& s = states_[i];
     const BodyMass& m = masses_[i];
     Vec3 v = s.v + h * (gravity_scale_[i] * settings_.gravity + m.inv_mass * forces_[i]);
@@ -339,7 +475,7 @@ void World::integrate_velocities(Real h) {
 void World::integrate_positions(Real h) {
   const int n = body_count();
   for (int i = 0; i < n; ++i) {
-    if (kinds_[i] == BodyKind::kStatic) continue;
+    if (!awake_[i]) continue;  // static or sleeping
     BodyState& s = states_[i];
     const Vec3& lc = masses_[i].local_com;
     const Vec3 com = positions_[i] + orientations_[i] * lc + h * s.v;
@@ -361,7 +497,7 @@ void World::run_step() {
     long long moved = 0;
     StageTimer t(profile_[kUpdateBroadphase]);
     for (int i = 0; i < n; ++i) {
-      if (kinds_[i] == BodyKind::kStatic) continue;
+      if (!awake_[i]) continue;  // static or sleeping: the proxy stays where it is
       const Aabb box = shapes_[i]->world_aabb(Pose(positions_[i], orientations_[i])).fattened(spec);
       broadphase_->move_proxy(proxies_[i], box, dt * linear_velocities_[i]);
       ++moved;
@@ -383,14 +519,39 @@ void World::run_step() {
   constraint_keys_.clear();
   {
     StageTimer t(profile_[kNarrowphase]);
-    CollideSettings cs;
-    cs.margin = spec;
-    for (const ProxyPair& pp : pairs_) {
+    auto rows = [&](const ProxyPair& pp) {
       int sa = static_cast<int>(broadphase_->user_data(pp.first));
       int sb = static_cast<int>(broadphase_->user_data(pp.second));
       if (sa > sb) std::swap(sa, sb);  // the pair's order is its slots' order
-      const int a = slots_[sa].index, b = slots_[sb].index;
-      if (kinds_[a] != BodyKind::kDynamic && kinds_[b] != BodyKind::kDynamic) continue;
+      return std::array<int, 4>{sa, sb, slots_[sa].index, slots_[sb].index};
+    };
+    // Wake sleeping islands that something moving overlaps (broadphase boxes, so a
+    // pile wakes a step before contact rather than a step late), until no more wake:
+    // a woken island may overlap another sleeping one.
+    if (!islands_.empty()) {
+      for (bool woke = true; woke;) {
+        woke = false;
+        for (const ProxyPair& pp : pairs_) {
+          const auto [sa, sb, a, b] = rows(pp);
+          if (sleep_island_[a] >= 0 && moving(b)) {
+            wake_island(sleep_island_[a]);
+            woke = true;
+          } else if (sleep_island_[b] >= 0 && moving(a)) {
+            wake_island(sleep_island_[b]);
+            woke = true;
+          }
+        }
+      }
+    }
+    CollideSettings cs;
+    cs.margin = spec;
+    for (const ProxyPair& pp : pairs_) {
+      const auto [sa, sb, a, b] = rows(pp);
+      // At least one awake dynamic body: pairs of sleeping, static and kinematic
+      // bodies need no contact.
+      const bool a_dyn = kinds_[a] == BodyKind::kDynamic && awake_[a];
+      const bool b_dyn = kinds_[b] == BodyKind::kDynamic && awake_[b];
+      if (!a_dyn && !b_dyn) continue;
       manifolds_scratch_.clear();
       collide(*shapes_[a], Pose(positions_[a], orientations_[a]), *shapes_[b], Pose(positions_[b], orientations_[b]),
               manifolds_scratch_, cs);
@@ -451,9 +612,10 @@ void World::run_step() {
       s.w = kinds_[i] == BodyKind::kStatic ? Vec3::Zero() : angular_velocities_[i];
       s.dp.setZero();
       s.dq = Quat::Identity();
-      s.inv_mass = masses_[i].inv_mass;
-      s.inv_inertia = kinds_[i] == BodyKind::kDynamic ? world_inv_inertia(orientations_[i], masses_[i].inv_inertia_local)
-                                                      : Mat3::Zero();
+      // Sleeping bodies are in no constraint; they get no inertia (and cost no matrix).
+      const bool active = kinds_[i] == BodyKind::kDynamic && awake_[i];
+      s.inv_mass = active ? masses_[i].inv_mass : 0;
+      s.inv_inertia = active ? world_inv_inertia(orientations_[i], masses_[i].inv_inertia_local) : Mat3::Zero();
     }
     const int substeps = settings_.substeps;
     const Real h = dt / substeps, inv_h = 1 / h;
@@ -486,7 +648,7 @@ void World::run_step() {
   {
     StageTimer t(profile_[kStoreImpulses], points);
     for (int i = 0; i < n; ++i) {
-      if (kinds_[i] != BodyKind::kDynamic) continue;
+      if (kinds_[i] != BodyKind::kDynamic || !awake_[i]) continue;
       linear_velocities_[i] = states_[i].v;
       angular_velocities_[i] = states_[i].w;
       forces_[i].setZero();
@@ -501,6 +663,14 @@ void World::run_step() {
         cm.points[j] = CachedPoint{c.points[j].feature_id, c.points[j].normal_impulse,
                                    c.points[j].tangent_impulse[0] * c.tangent1 +
                                        c.points[j].tangent_impulse[1] * c.tangent2};
+    }
+  }
+  // ---- update_sleep ----
+  {
+    StageTimer t(profile_[kUpdateSleep]);
+    if (settings_.enable_sleep) {
+      update_sleep();
+      t.set_count(awake_dynamic_count());
     }
   }
   ++step_count_;

@@ -3,6 +3,8 @@
 
 #include <cmath>
 #include <memory>
+#include <string>
+#include <vector>
 
 #include "wmo/world/world.h"
 
@@ -91,15 +93,119 @@ TEST(World, BadInputRaisesAndLeavesTheWorldUnchanged) {
 // (the soft contact holds a 1 m box under gravity with a sub-millimetre spring
 // deflection at 30 Hz: g / (2 pi 30)^2 = 0.3 mm) and velocity below 1 mm/s.
 TEST(World, BoxComesToRestOnTheGround) {
+  for (const bool sleep : {false, true}) {
+    WorldSettings s;
+    s.enable_sleep = sleep;
+    World w = ground_world(s);
+    const BodyId id = w.add_body(box_def(Vec3(0.5, 0.5, 0.5), Vec3(0, 2, 0)));
+    w.step(180);
+    const int i = w.index_of(id);
+    EXPECT_NEAR(w.positions()[i].y(), 0.5, 1e-3);
+    EXPECT_LT(w.linear_velocities()[i].norm(), 1e-3);
+    EXPECT_LT(w.angular_velocities()[i].norm(), 1e-3);
+    if (sleep) {
+      // At rest for more than time_to_sleep (0.5 s) of the 3 s: asleep, no contact work.
+      EXPECT_FALSE(w.is_awake(i));
+      EXPECT_EQ(w.contact_point_count(), 0);
+    } else {
+      EXPECT_TRUE(w.is_awake(i));
+      EXPECT_EQ(w.contact_point_count(), 4);
+      EXPECT_LT(w.max_penetration(), 1e-3);
+    }
+  }
+}
+
+// ---- Sleeping ------------------------------------------------------------------------
+
+namespace {
+long long stage_count(const World& w, const char* name) {
+  for (std::size_t k = 0; k < kStageNames.size(); ++k)
+    if (std::string(kStageNames[k]) == name) return w.profile()[k].count;
+  return -1;
+}
+}  // namespace
+
+// A resting box falls asleep and then costs nothing: no proxy moves, no contact, no
+// solve. A box dropped onto it wakes it (broadphase overlap), and both sleep again.
+TEST(World, SleepingBoxCostsNothingAndWakesWhenHit) {
   World w = ground_world();
-  const BodyId id = w.add_body(box_def(Vec3(0.5, 0.5, 0.5), Vec3(0, 2, 0)));
-  w.step(180);
-  const int i = w.index_of(id);
-  EXPECT_NEAR(w.positions()[i].y(), 0.5, 1e-3);
-  EXPECT_LT(w.linear_velocities()[i].norm(), 1e-3);
-  EXPECT_LT(w.angular_velocities()[i].norm(), 1e-3);
-  EXPECT_GT(w.contact_point_count(), 0);
-  EXPECT_LT(w.max_penetration(), 1e-3);
+  const BodyId a = w.add_body(box_def(Vec3(0.5, 0.5, 0.5), Vec3(0, 0.5, 0)));
+  w.step(60);  // 1 s at rest: past time_to_sleep
+  ASSERT_FALSE(w.is_awake(w.index_of(a)));
+  EXPECT_EQ(w.awake_dynamic_count(), 0);
+  w.step();
+  EXPECT_EQ(stage_count(w, "update_broadphase"), 0);
+  EXPECT_EQ(stage_count(w, "narrowphase"), 0);
+  EXPECT_EQ(stage_count(w, "solve"), 0);
+  EXPECT_EQ(w.linear_velocities()[w.index_of(a)], Vec3::Zero());
+  const BodyId b = w.add_body(box_def(Vec3(0.5, 0.5, 0.5), Vec3(0.2, 3, 0)));
+  bool woke = false;
+  for (int k = 0; k < 120 && !woke; ++k) {
+    w.step();
+    woke = w.is_awake(w.index_of(a));
+  }
+  EXPECT_TRUE(woke);
+  w.step(300);
+  EXPECT_NEAR(w.positions()[w.index_of(b)].y(), 1.5, 2e-3);  // on top of a
+  EXPECT_EQ(w.awake_dynamic_count(), 0);  // both asleep again
+}
+
+TEST(World, ImpulseSetterAndWrittenVelocityWakeTheIsland) {
+  World w = ground_world();
+  const BodyId a = w.add_body(box_def(Vec3(0.5, 0.5, 0.5), Vec3(0, 0.5, 0)));
+  const BodyId b = w.add_body(box_def(Vec3(0.5, 0.5, 0.5), Vec3(0, 1.5, 0)));
+  w.step(120);
+  ASSERT_EQ(w.awake_dynamic_count(), 0);
+  // An impulse on the lower box wakes its whole island (the box on top too).
+  w.apply_impulse(a, Vec3(0.5, 0, 0), w.positions()[w.index_of(a)]);
+  EXPECT_TRUE(w.is_awake(w.index_of(a)));
+  EXPECT_TRUE(w.is_awake(w.index_of(b)));
+  w.step(240);
+  ASSERT_EQ(w.awake_dynamic_count(), 0);
+  w.set_linear_velocity(b, Vec3(0, 1, 0));
+  EXPECT_TRUE(w.is_awake(w.index_of(a)));
+  w.step(240);
+  ASSERT_EQ(w.awake_dynamic_count(), 0);
+  // A velocity written straight into the state array wakes it at the next step.
+  w.linear_velocities()[w.index_of(b)] = Vec3(0, 2, 0);
+  w.step();
+  EXPECT_EQ(w.awake_dynamic_count(), 2);
+  EXPECT_GT(w.positions()[w.index_of(b)].y(), 1.5);  // and the velocity was used
+}
+
+TEST(World, RemovingASleepingSupportWakesWhatRestsOnIt) {
+  World w = ground_world();
+  const BodyId a = w.add_body(box_def(Vec3(0.5, 0.5, 0.5), Vec3(0, 0.5, 0)));
+  const BodyId b = w.add_body(box_def(Vec3(0.5, 0.5, 0.5), Vec3(0, 1.5, 0)));
+  w.step(120);
+  ASSERT_EQ(w.awake_dynamic_count(), 0);
+  w.remove_body(a);
+  EXPECT_TRUE(w.is_awake(w.index_of(b)));
+  w.step(120);
+  EXPECT_NEAR(w.positions()[w.index_of(b)].y(), 0.5, 2e-3);  // fell onto the ground
+}
+
+TEST(World, KinematicAtRestLetsAPileSleepAndMovingOneWakesIt) {
+  World w = ground_world();
+  const BodyId k = w.add_body(box_def(Vec3(0.5, 0.5, 0.5), Vec3(1.0, 0.5, 0), BodyKind::kKinematic));
+  const BodyId a = w.add_body(box_def(Vec3(0.5, 0.5, 0.5), Vec3(0, 0.5, 0)));
+  w.step(120);
+  EXPECT_FALSE(w.is_awake(w.index_of(a)));  // touching a kinematic body at rest
+  w.set_linear_velocity(k, Vec3(-0.5, 0, 0));
+  w.step();
+  EXPECT_TRUE(w.is_awake(w.index_of(a)));
+  w.step(60);
+  EXPECT_LT(w.positions()[w.index_of(a)].x(), -0.2);  // pushed along
+}
+
+TEST(World, SleepingOffKeepsEverythingAwake) {
+  WorldSettings s;
+  s.enable_sleep = false;
+  World w = ground_world(s);
+  w.add_body(box_def(Vec3(0.5, 0.5, 0.5), Vec3(0, 0.5, 0)));
+  w.step(120);
+  EXPECT_EQ(w.awake_dynamic_count(), 1);
+  EXPECT_EQ(stage_count(w, "update_sleep"), 0);  // the stage is skipped
 }
 
 // A stack of 10 unit boxes stands for 10 s: every box within 1 cm of its start.

@@ -71,6 +71,17 @@ struct WorldSettings {
   /// default, as in Box2D and Bullet.
   bool gyroscopic = false;
   BroadphaseType broadphase = BroadphaseType::kAabbTree;
+  /// Sleeping (Box2D v3's rule and thresholds): bodies connected by contacts form an
+  /// island; when every body of an island has moved slower than both thresholds for
+  /// `time_to_sleep`, the island sleeps: its velocities are zeroed and it costs nothing
+  /// (no integration, broadphase update, contacts or solve) until something wakes it:
+  /// an awake body or a moving kinematic body overlapping one of its bodies (broadphase
+  /// boxes), a force, impulse or setter on one of its bodies, a velocity or pose written
+  /// into its rows of the state arrays, or the removal of one of its bodies.
+  bool enable_sleep = true;
+  Real sleep_linear_threshold = 0.05;   ///< unit: m/s, of the centre of mass
+  Real sleep_angular_threshold = 2 * 3.14159265358979323846 / 180;  ///< unit: rad/s (2 deg/s)
+  Real time_to_sleep = 0.5;             ///< unit: s
 };
 
 /// Checks every setting and throws InvalidArgument naming the first bad one.
@@ -94,8 +105,8 @@ struct StageProfile {
 };
 
 /// Names of the step's stages, in order.
-inline constexpr std::array<const char*, 6> kStageNames = {
-    "update_broadphase", "find_pairs", "narrowphase", "solve", "restitution", "store_impulses"};
+inline constexpr std::array<const char*, 7> kStageNames = {
+    "update_broadphase", "find_pairs", "narrowphase", "solve", "restitution", "store_impulses", "update_sleep"};
 
 /// One contact point as World::contacts reports it (world frame).
 struct ContactInfo {
@@ -156,6 +167,13 @@ class World {
   void set_angular_velocity(BodyId id, const Vec3& w);
 
   BodyKind kind(int index) const { return kinds_[index]; }
+  /// True for a dynamic body that is awake, and for every kinematic body; false for
+  /// static and sleeping bodies.
+  bool is_awake(int index) const { return awake_[index] != 0; }
+  /// Number of awake dynamic bodies.
+  int awake_dynamic_count() const;
+  /// Wakes the body's island (no effect on an awake, static or kinematic body).
+  void wake(BodyId id);
   const BodyMass& mass(int index) const { return masses_[index]; }
   const Shape& shape(int index) const { return *shapes_[index]; }
   Real friction(int index) const { return frictions_[index]; }
@@ -176,7 +194,8 @@ class World {
   /// Per-stage profile of the last step (and accumulated), in kStageNames order.
   /// Counts: update_broadphase = moved bodies, find_pairs = candidate pairs,
   /// narrowphase = touching manifolds, solve = contact points, restitution = bouncing
-  /// contacts, store_impulses = contact points.
+  /// contacts, store_impulses = contact points, update_sleep = awake dynamic bodies
+  /// considered (0 when sleeping is off: the stage is skipped).
   const std::array<StageProfile, kStageNames.size()>& profile() const { return profile_; }
   long long step_count() const { return step_count_; }
 
@@ -208,6 +227,10 @@ class World {
   void integrate_positions(Real h);
   void run_step();
   void validate_state();
+  void wake_island(int island);
+  void wake_row(int index);
+  void update_sleep();
+  bool moving(int i) const;
 
   WorldSettings settings_;
   std::unique_ptr<Broadphase> broadphase_;
@@ -224,6 +247,19 @@ class World {
   std::vector<Vec3> forces_, torques_;
   std::vector<ProxyId> proxies_;
   std::vector<std::int32_t> slot_of_;  // dense row -> slot
+  // Sleeping, per dense row: awake flag (see is_awake), time below the thresholds (s),
+  // and for a sleeping body its island (index into islands_) and the pose it fell
+  // asleep at (a pose written into the arrays afterwards wakes it).
+  std::vector<std::uint8_t> awake_;
+  std::vector<Real> sleep_time_;
+  std::vector<std::int32_t> sleep_island_;
+  std::vector<Vec3> sleep_position_;
+  std::vector<Quat> sleep_orientation_;
+  // Sleeping islands: the slots of their bodies (slots survive swap-removal).
+  std::vector<std::vector<std::int32_t>> islands_;
+  std::vector<std::int32_t> free_islands_;
+  std::vector<std::int32_t> island_parent_, island_of_root_;  // update_sleep scratch, per row
+  std::vector<Real> sleep_scratch_;
 
   std::vector<Slot> slots_;
   std::vector<std::int32_t> free_slots_;
