@@ -107,8 +107,11 @@ def check_mirror(a, pa, b, pb, special):
     # several points the reference face may legitimately differ between the two orders,
     # and at a tie (e.g. coincident sphere centres, where any direction is minimal) the
     # points belong to different normals.
+    # Not with cylinders: a cylinder's side against a face or an edge touches along a
+    # segment, where the single EPA witness point may be anywhere on it (found by
+    # HYPOTHESIS_PROFILE=explore: 0.8 m apart along a cylinder side against a box).
     same_normal = np.linalg.norm(ab.normal + ba.normal) <= TOL
-    if same_normal and ab.count == 1 and ba.count == 1:
+    if same_normal and ab.count == 1 and ba.count == 1 and not involves_cylinder(a, b):
         np.testing.assert_allclose(ab.points_a, ba.points_b, atol=TOL)
         np.testing.assert_allclose(ab.points_b, ba.points_a, atol=TOL)
         np.testing.assert_allclose(ab.depths, ba.depths, atol=TOL)

@@ -46,6 +46,12 @@
 namespace wmo {
 namespace {
 
+/// See exact_path in collide_box_box: how closely (relative to the box size) a clipped
+/// point's depth must match the SAT separation for a separated face contact to count as
+/// exact.
+constexpr Real kSeparatedExactRel = 1e-9;
+
+
 /// An edge axis e_i x R_j with |e_i x R_j| = sin(angle) below this is skipped: the
 /// edges are parallel within 1e-6 rad, their cross product's direction is dominated
 /// by round-off and any separating axis it would give is, within that angle, already
@@ -202,6 +208,23 @@ bool collide_box_box(const Box& a, const Box& b, const Pose& b_in_a, Real margin
   }
   if (clip::sat_better(sep_e, best, size)) kind = AxisKind::kEdge;
 
+  // Cores apart (best > 0): the SAT separation is only a lower bound on the distance
+  // (corner against corner it is smaller), so a speculative contact measured by it would
+  // be too deep. It is exact in one case, the common one in a resting pile: a face axis
+  // whose clipped incident points include one at that separation, since a point of B
+  // inside A's face prism at distance s from the face plane is at distance s from A
+  // (so distance <= s <= distance). Every other separated pair, and any rounded pair
+  // with cores apart, gets the exact generic path (GJK distance on the cores).
+  auto exact_path = [&] {
+    CollideSettings s;
+    s.margin = margin;
+    m = Manifold{};
+    return collide_convex_convex(a, b, b_in_a, s, m);
+  };
+  // The chosen axis's separation (best is the face axes' when an edge axis wins).
+  const bool apart = (kind == AxisKind::kEdge ? sep_e : best) > 0;
+  if (apart && (kind == AxisKind::kEdge || ra + rb > 0)) return exact_path();
+
   if (kind == AxisKind::kEdge) {
     const int i = edge_i, j = edge_j;
     const int a1 = (i + 1) % 3, a2 = (i + 2) % 3;
@@ -274,10 +297,12 @@ bool collide_box_box(const Box& a, const Box& b, const Pose& b_in_a, Real margin
   const std::uint32_t id_base = clip::face_contact_id(!ref_on_a, ref_face, inc_face);
   ContactPoint pts[kMaxBoxClip];
   int n = 0;
+  Real max_clip = -kInf;
   for (int k = 0; k < poly.count; ++k) {
     const Vec3& p = poly.v[k].p;
     // Core depth: how far the incident point lies below the reference face plane.
     const Real depth = h_ref[ref_axis] - ref_sign * p[ref_axis] + ra + rb;
+    max_clip = std::max(max_clip, depth);
     if (!(depth >= -margin)) continue;
     Vec3 pa_core;
     if (ref_on_a) {
@@ -294,6 +319,9 @@ bool collide_box_box(const Box& a, const Box& b, const Pose& b_in_a, Real margin
   // the clip loses it only when it lies outside the reference face's prism, where it
   // would not be on A. An empty clip reports that corner as its single point.
   const Real sat_depth = -best + ra + rb;
+  // Apart: exact only if a clipped point realises the separation (see exact_path);
+  // 1e-9 of the size is far above the round-off between the two ways of computing it.
+  if (apart && !(max_clip >= sat_depth - kSeparatedExactRel * size)) return exact_path();
   if (n == 0 && sat_depth >= -margin) {
     Vec3 p_core;
     if (ref_on_a) {
