@@ -426,15 +426,19 @@ void World::validate_state() {
     if (!std::isfinite(qn) || std::abs(qn - 1) > kUnitQuatTolerance)
       fail("orientations", i, "must be a unit quaternion, got norm " + std::to_string(qn));
   }
-  for (int i = 0; i < body_count(); ++i) orientations_[i].normalize();  // within tolerance: exact unit
   // A sleeping body has zero velocity and the pose it fell asleep at: anything else was
-  // written by the user, and wakes its island.
+  // written by the user, and wakes its island. (Checked on the values as written,
+  // before the normalisation below, which may change the last bit.)
   for (int i = 0; i < body_count(); ++i) {
     if (sleep_island_[i] < 0) continue;
     if (!linear_velocities_[i].isZero(0) || !angular_velocities_[i].isZero(0) ||
         positions_[i] != sleep_position_[i] || !(orientations_[i].coeffs() == sleep_orientation_[i].coeffs()))
       wake_island(sleep_island_[i]);
   }
+  // Within tolerance: made exactly unit. Sleeping bodies keep the (unit) orientation
+  // they fell asleep with, bit for bit, so that the check above stays meaningful.
+  for (int i = 0; i < body_count(); ++i)
+    if (sleep_island_[i] < 0) orientations_[i].normalize();
 }
 
 void World::step(int n) {

@@ -275,3 +275,18 @@ TEST(World, RestitutionBouncesBallToESquaredHeight) {
   // 1/240 s), inside the 2% bound.
   EXPECT_NEAR(apex, 0.64, 0.02 * 0.64);
 }
+
+// A rotated body stays asleep across many step() calls (each call checks the state
+// arrays and normalises quaternions; that must not look like a user write).
+TEST(World, RotatedSleepingBodyStaysAsleepAcrossStepCalls) {
+  World w = ground_world();
+  BodyDef d = box_def(Vec3(0.5, 0.5, 0.5), Vec3(0.3, 0.5, -0.2));
+  d.orientation = Quat(Eigen::AngleAxisd(0.7312, Vec3::UnitY()));
+  const BodyId a = w.add_body(d);
+  w.step(120);
+  ASSERT_FALSE(w.is_awake(w.index_of(a)));
+  for (int k = 0; k < 50; ++k) {
+    w.step(1);
+    ASSERT_FALSE(w.is_awake(w.index_of(a))) << "woke at call " << k;
+  }
+}
