@@ -301,7 +301,7 @@ void collide_triangle(const MeshContext& ctx, int t, std::vector<Manifold>& out)
   const Real margin = ctx.settings.margin;
 
   const DistanceResult r = triangle_convex(v[0], v[1], v[2], ctx.b, ctx.b_in_a, true,
-                                           ctx.settings.gjk, ctx.settings.epa);
+                                           ctx.settings.gjk, ctx.settings.epa, margin);
   if (!(r.distance <= margin)) return;  // apart (or NaN: never report it)
 
   // Side of B's centre, used when N does not decide it.

@@ -381,12 +381,12 @@ DistanceResult plane_convex(const Plane& a, const ConvexShape& b, const Pose& b_
 
 DistanceResult triangle_convex(const Vec3& v0, const Vec3& v1, const Vec3& v2, const ConvexShape& b,
                                const Pose& b_in_a, bool signed_distance, const GjkSettings& gjk,
-                               const EpaSettings& epa) {
+                               const EpaSettings& epa, Real cull_distance) {
   const TriangleSupport tri(v0, v1, v2);
   return visit_convex(b, [&](const auto& cb) {
     using B = std::decay_t<decltype(cb)>;
     return core_pair(tri, Real(0), CoreSupport<B>(cb), cb.radius(), b_in_a, signed_distance, gjk,
-                     epa);
+                     epa, cull_distance);
   });
 }
 

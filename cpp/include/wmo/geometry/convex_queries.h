@@ -57,10 +57,10 @@ DistanceResult plane_convex(const Plane& a, const ConvexShape& b, const Pose& b_
 /// Triangle (v0, v1, v2 in A's frame, a zero-thickness convex set) against convex B at
 /// `b_in_a`: the per-triangle routine of the triangle-mesh queries. Same semantics as
 /// distance_convex_convex (signed_distance false) or penetration_convex_convex (true).
-/// The triangle is two-sided here.
+/// The triangle is two-sided here. `cull_distance` as for penetration_convex_convex.
 DistanceResult triangle_convex(const Vec3& v0, const Vec3& v1, const Vec3& v2, const ConvexShape& b,
                                const Pose& b_in_a, bool signed_distance, const GjkSettings& gjk = {},
-                               const EpaSettings& epa = {});
+                               const EpaSettings& epa = {}, Real cull_distance = kInf);
 
 /// True if the triangle (A's frame) and convex B touch or overlap.
 bool intersect_triangle_convex(const Vec3& v0, const Vec3& v1, const Vec3& v2, const ConvexShape& b,
