@@ -1,0 +1,153 @@
+"""What accuracy costs in time (issue 3, section 6), WMO's side: each accuracy knob of the
+world (time step, substeps, velocity iterations) swept one at a time from the defaults
+(dt 1/60 s, 4 substeps, 1 iteration) on cases with a known answer, measuring the error
+against the cost in milliseconds of wall time per simulated second.
+
+Cases (the error is in metres or a relative number, as stated):
+  bounce   a ball (restitution 0.5) dropped from 1 m onto the ground: relative error of
+           the first rebound height against e^2 h (PyBullet and MuJoCo are not run yet).
+  slide    a box launched at 5 m/s on ground with pair friction 0.25: error of the
+           stopping distance against v^2 / (2 mu g) (m).
+  stack10  10 unit boxes stacked face to face, 5 s: the largest displacement of a box
+           centre (m; a standing stack stays at the millimetre level).
+  pyramid10  the SCENES.md pyramid with 10 layers (385 boxes), 5 s: the same measure.
+
+Writes results/accuracy/accuracy.csv and one PNG per case (error against cost, one
+series per knob). Usage: .venv/bin/python benchmarks/accuracy/run.py [--out DIR] [--quick]
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import time
+from pathlib import Path
+
+import numpy as np
+
+import wmo
+from wmo import scenes
+
+G = 10.0
+DEFAULT = {"dt": 1 / 60, "substeps": 4, "iterations": 1}
+SWEEPS = {
+    "dt": [1 / 30, 1 / 60, 1 / 120, 1 / 240, 1 / 480, 1 / 960],
+    "substeps": [1, 2, 4, 8, 16],
+    "iterations": [1, 2, 4, 10, 20, 50],
+}
+
+
+def world(settings, **kw):
+    return wmo.World(gravity=(0, -G, 0), dt=settings["dt"], substeps=settings["substeps"],
+                     iterations=settings["iterations"], sleeping=False, **kw)
+
+
+def ground(w, friction=0.5):
+    w.add_body(wmo.Box((50, 1, 50)), position=(0, -1, 0), kind="static", friction=friction)
+
+
+def run_for(w, seconds, dt, each=None):
+    n = max(1, round(seconds / dt))
+    t0 = time.perf_counter()
+    for k in range(n):
+        w.step()
+        if each:
+            each(k)
+    return (time.perf_counter() - t0) * 1e3 / seconds, n
+
+
+def case_bounce(s):
+    e, h, r = 0.5, 1.0, 0.1
+    w = world(s, restitution_threshold=0.1)
+    ground(w)
+    b = w.add_body(wmo.Sphere(r), position=(0, r + h, 0), restitution=e)
+    state = {"fell": False, "peak": 0.0}
+
+    def watch(_):
+        y, vy = b.position[1] - r, b.linear_velocity[1]
+        if vy > 0:
+            state["fell"] = True
+        if state["fell"]:
+            state["peak"] = max(state["peak"], y)
+
+    ms, _ = run_for(w, 1.2, s["dt"], watch)  # fall (0.45 s) and first rebound (0.22 s up)
+    return ms, abs(state["peak"] - e * e * h) / (e * e * h)
+
+
+def case_slide(s):
+    v0, mu = 5.0, 0.25
+    w = world(s)
+    ground(w, friction=0.5)
+    b = w.add_body(wmo.Box((0.5, 0.5, 0.5)), position=(0, 0.5, 0), linear_velocity=(v0, 0, 0), friction=0.5)
+    ms, _ = run_for(w, 3.0, s["dt"])  # stops after v0 / (mu g) = 2 s
+    return ms, abs(b.position[0] - v0 * v0 / (2 * mu * G))
+
+
+def case_stack(s, n=10):
+    w = scenes.tower(n, sleeping=False, dt=s["dt"], substeps=s["substeps"], iterations=s["iterations"])
+    p0 = np.array(w.positions)
+    ms, _ = run_for(w, 5.0, s["dt"])
+    return ms, float(np.linalg.norm(w.positions - p0, axis=1).max())
+
+
+def case_pyramid(s, layers=10):
+    w = scenes.pyramid(layers, sleeping=False, dt=s["dt"], substeps=s["substeps"], iterations=s["iterations"])
+    p0 = np.array(w.positions)
+    ms, _ = run_for(w, 5.0, s["dt"])
+    return ms, float(np.linalg.norm(w.positions - p0, axis=1).max())
+
+
+CASES = {"bounce": (case_bounce, "relative error of e^2 h"), "slide": (case_slide, "stopping distance error (m)"),
+         "stack10": (case_stack, "largest displacement (m)"), "pyramid10": (case_pyramid, "largest displacement (m)")}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--out", type=Path, default=Path("results/accuracy"))
+    ap.add_argument("--quick", action="store_true", help="the two cheapest cases and fewer settings")
+    args = ap.parse_args()
+    cases = ["bounce", "slide"] if args.quick else list(CASES)
+    sweeps = {k: v[:3] for k, v in SWEEPS.items()} if args.quick else SWEEPS
+    args.out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for case in cases:
+        fn, what = CASES[case]
+        for knob, values in sweeps.items():
+            for value in values:
+                s = dict(DEFAULT, **{knob: value})
+                ms, err = fn(s)
+                rows.append({"case": case, "knob": knob, "value": value, "dt": s["dt"], "substeps": s["substeps"],
+                             "iterations": s["iterations"], "ms_per_sim_second": ms, "error": err, "error_is": what})
+                print(f"{case:10s} {knob:10s} {value:10.5g}  {ms:9.2f} ms/sim s  error {err:.3e}", flush=True)
+    path = args.out / "accuracy.csv"
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    print(f"wrote {path}")
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    for case in cases:
+        fig, ax = plt.subplots(figsize=(6.5, 4.5))
+        for knob in sweeps:
+            pts = [(r["ms_per_sim_second"], r["error"], r["value"]) for r in rows if r["case"] == case and r["knob"] == knob]
+            ax.plot([p[0] for p in pts], [max(p[1], 1e-16) for p in pts], "o-", label=knob)
+            for x, y, v in pts:
+                label = f"1/{round(1 / v)}" if knob == "dt" else f"{v:g}"
+                ax.annotate(label, (x, max(y, 1e-16)), fontsize=7, xytext=(3, 3), textcoords="offset points")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("cost: wall ms per simulated second")
+        ax.set_ylabel(CASES[case][1])
+        ax.set_title(f"{case}: error against cost (WMO; one knob at a time from the defaults)")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend()
+        fig.tight_layout()
+        p = args.out / f"{case}_accuracy.png"
+        fig.savefig(p, dpi=120)
+        plt.close(fig)
+        print(f"wrote {p}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,30 @@
+"""benchmarks/accuracy/run.py runs (--quick) and measures what it claims: the sliding
+box's stopping-distance error converges at first order in dt (semi-implicit Euler),
+which is the error-against-cost trade-off the benchmark plots."""
+from __future__ import annotations
+
+import csv
+import pathlib
+import subprocess
+import sys
+
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+
+
+def test_accuracy_sweep_quick(tmp_path):
+    out = subprocess.run([sys.executable, str(ROOT / "benchmarks/accuracy/run.py"), "--quick", "--out", str(tmp_path)],
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    rows = list(csv.DictReader(open(tmp_path / "accuracy.csv")))
+    assert {r["case"] for r in rows} == {"bounce", "slide"}
+    slide_dt = sorted(((float(r["dt"]), float(r["error"])) for r in rows
+                       if r["case"] == "slide" and r["knob"] == "dt"), reverse=True)
+    assert len(slide_dt) == 3
+    # Halving dt halves the error (first order), to within 5%.
+    for (dt0, e0), (dt1, e1) in zip(slide_dt, slide_dt[1:]):
+        assert dt1 == pytest.approx(dt0 / 2)
+        assert e1 / e0 == pytest.approx(0.5, rel=0.05)
+    assert all(float(r["ms_per_sim_second"]) > 0 for r in rows)
+    assert (tmp_path / "slide_accuracy.png").stat().st_size > 1000
