@@ -65,7 +65,7 @@ inline void flip(Manifold& m) {
 template <class SA, class SB>
 using SpecialFn = bool (*)(const SA&, const SB&, const Pose&, Real, Manifold&);
 
-/// The SAT-based routines (capsule-box, box-box, hull-hull) measure a separated pair
+/// The SAT-based routines (capsule-box, hull-hull) measure a separated pair
 /// along their best separating axis, which is only a lower bound on the distance, and
 /// clipping may then report a gap that is too large or too small. A pair that is
 /// separated but within the margin (every point's depth < 0) is therefore handed to the

@@ -201,10 +201,10 @@ BodyId World::add_body(const BodyDef& def) {
 }
 
 void World::remove_body(BodyId id) {
-  int i = require(id, "remove_body");
-  // Bodies resting on a sleeping body must not float once it is gone.
-  if (sleep_island_[i] >= 0) wake_island(sleep_island_[i]);
-  i = index_of(id);
+  const int i = require(id, "remove_body");
+  // Bodies resting on a sleeping body must not float once it is gone (waking moves no
+  // rows, so i stays valid).
+  wake_row(i);
   broadphase_->destroy_proxy(proxies_[i]);
   // Forget cached contacts of this slot: a later body in the same slot must not inherit
   // its impulses.
@@ -312,7 +312,7 @@ void World::apply_torque(BodyId id, const Vec3& torque) {
 
 int World::awake_dynamic_count() const {
   int n = 0;
-  for (int i = 0; i < body_count(); ++i) n += kinds_[i] == BodyKind::kDynamic && awake_[i];
+  for (int i = 0; i < body_count(); ++i) n += awake_dynamic(i);
   return n;
 }
 
@@ -337,7 +337,7 @@ void World::wake_island(int island) {
 // Moves this step and can wake what it touches: an awake dynamic body, or a kinematic
 // body with a velocity (a kinematic body at rest leaves a sleeping pile asleep).
 bool World::moving(int i) const {
-  if (kinds_[i] == BodyKind::kDynamic) return awake_[i] != 0;
+  if (kinds_[i] == BodyKind::kDynamic) return awake_dynamic(i);
   if (kinds_[i] == BodyKind::kKinematic)
     return !linear_velocities_[i].isZero(0) || !angular_velocities_[i].isZero(0);
   return false;
@@ -356,7 +356,7 @@ void World::update_sleep() {
   island_parent_.resize(n);
   for (int i = 0; i < n; ++i) {
     island_parent_[i] = i;
-    if (kinds_[i] != BodyKind::kDynamic || !awake_[i]) continue;
+    if (!awake_dynamic(i)) continue;
     const bool slow = linear_velocities_[i].squaredNorm() <= lin2 && angular_velocities_[i].squaredNorm() <= ang2;
     sleep_time_[i] = slow ? sleep_time_[i] + dt : 0;
   }
@@ -380,14 +380,14 @@ void World::update_sleep() {
   std::vector<Real>& min_time = sleep_scratch_;
   min_time.assign(n, kInf);
   for (int i = 0; i < n; ++i)
-    if (is_dyn(i) && awake_[i]) {
+    if (awake_dynamic(i)) {
       const int r = find(i);
       min_time[r] = std::min(min_time[r], sleep_time_[i]);
     }
   std::vector<std::int32_t>& island_of_root = island_of_root_;
   island_of_root.assign(n, -1);
   for (int i = 0; i < n; ++i) {
-    if (!is_dyn(i) || !awake_[i]) continue;
+    if (!awake_dynamic(i)) continue;
     const int r = find(i);
     if (!(min_time[r] >= settings_.time_to_sleep)) continue;
     if (island_of_root[r] < 0) {
@@ -451,7 +451,7 @@ void World::step(int n) {
 void World::integrate_velocities(Real h) {
   const int n = body_count();
   for (int i = 0; i < n; ++i) {
-    if (kinds_[i] != BodyKind::kDynamic || !awake_[i]) continue;  // static, kinematic, sleeping
+    if (!awake_dynamic(i)) continue;  // static, kinematic, sleeping
     BodyState& s = states_[i];
     const BodyMass& m = masses_[i];
     Vec3 v = s.v + h * (gravity_scale_[i] * settings_.gravity + m.inv_mass * forces_[i]);
@@ -553,9 +553,7 @@ void World::run_step() {
       const auto [sa, sb, a, b] = rows(pp);
       // At least one awake dynamic body: pairs of sleeping, static and kinematic
       // bodies need no contact.
-      const bool a_dyn = kinds_[a] == BodyKind::kDynamic && awake_[a];
-      const bool b_dyn = kinds_[b] == BodyKind::kDynamic && awake_[b];
-      if (!a_dyn && !b_dyn) continue;
+      if (!awake_dynamic(a) && !awake_dynamic(b)) continue;
       manifolds_scratch_.clear();
       collide(*shapes_[a], Pose(positions_[a], orientations_[a]), *shapes_[b], Pose(positions_[b], orientations_[b]),
               manifolds_scratch_, cs);
@@ -617,7 +615,7 @@ void World::run_step() {
       s.dp.setZero();
       s.dq = Quat::Identity();
       // Sleeping bodies are in no constraint; they get no inertia (and cost no matrix).
-      const bool active = kinds_[i] == BodyKind::kDynamic && awake_[i];
+      const bool active = awake_dynamic(i);
       s.inv_mass = active ? masses_[i].inv_mass : 0;
       s.inv_inertia = active ? world_inv_inertia(orientations_[i], masses_[i].inv_inertia_local) : Mat3::Zero();
     }
@@ -652,7 +650,7 @@ void World::run_step() {
   {
     StageTimer t(profile_[kStoreImpulses], points);
     for (int i = 0; i < n; ++i) {
-      if (kinds_[i] != BodyKind::kDynamic || !awake_[i]) continue;
+      if (!awake_dynamic(i)) continue;
       linear_velocities_[i] = states_[i].v;
       angular_velocities_[i] = states_[i].w;
       forces_[i].setZero();

@@ -231,6 +231,9 @@ class World {
   void wake_row(int index);
   void update_sleep();
   bool moving(int i) const;
+  /// A dynamic body that is awake: the only kind that integrates, joins islands and
+  /// needs contacts.
+  bool awake_dynamic(int i) const { return kinds_[i] == BodyKind::kDynamic && awake_[i] != 0; }
 
   WorldSettings settings_;
   std::unique_ptr<Broadphase> broadphase_;
