@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 
 namespace wmo {
 
@@ -456,18 +457,6 @@ void World::integrate_velocities(Real h) {
     const BodyMass& m = masses_[i];
     Vec3 v = s.v + h * (gravity_scale_[i] * settings_.gravity + m.inv_mass * forces_[i]);
     Vec3 w = s.w + h * (s.inv_inertia * torques_[i]);
-    if (settings_.gyroscopic) {
-      // Implicit gyroscopic term (Catto, "Numerical Methods", GDC 2015): one Newton
-      // step on I (w2 - w1) + h w2 x I w2 = 0 in body coordinates.
-      const Quat q = s.dq * orientations_[i];
-      const Mat3 r = q.toRotationMatrix();
-      const Vec3 wb = r.transpose() * w;
-      const Mat3& ib = m.inertia_local;
-      const Vec3 iw = ib * wb;
-      const Vec3 f = h * wb.cross(iw);
-      const Mat3 jac = ib + h * (skew(wb) * ib - skew(iw));
-      w = r * (wb - jac.partialPivLu().solve(f));
-    }
     // Damping in the implicit form of Box2D and Jolt: stable for any h * damping.
     v *= 1 / (1 + h * linear_damping_[i]);
     w *= 1 / (1 + h * angular_damping_[i]);
@@ -483,14 +472,90 @@ void World::integrate_positions(Real h) {
     BodyState& s = states_[i];
     const Vec3& lc = masses_[i].local_com;
     const Vec3 com = positions_[i] + orientations_[i] * lc + h * s.v;
-    const Quat q = integrate_rotation(orientations_[i], s.w, h);
+    // The rotation uses w_rot; without the gyroscopic term it is the velocity itself.
+    Vec3 w_rot = s.w;
+    if (settings_.gyroscopic && kinds_[i] == BodyKind::kDynamic) {
+      // Torque-free rotation keeps the world angular momentum L = R I R^T w while R
+      // turns. Implicit midpoint on the rotation: w_rot = I(R_mid)^-1 L with R_mid
+      // the half-substep rotation by w_rot (three fixed-point passes; each gains about
+      // an order of h |w| in accuracy), then the new velocity is I(R_new)^-1 L. L is
+      // conserved to rounding and the energy error stays bounded (measured: within
+      // 3.5% over 100 s for a spinning 50:1 rod, never above the start), where
+      // Catto's implicit Newton step on the Euler equations dissipates (25-100% of L
+      // lost over 10 s at 240 Hz) and the explicit term gains energy.
+      const Mat3& ib = masses_[i].inertia_local;
+      const Mat3& ib_inv = masses_[i].inv_inertia_local;
+      const Quat& q0 = orientations_[i];
+      const Mat3 r0 = q0.toRotationMatrix();
+      const Vec3 l = r0 * (ib * (r0.transpose() * s.w));
+      for (int pass = 0; pass < 3; ++pass) {
+        const Mat3 rm = integrate_rotation(q0, w_rot, 0.5 * h).toRotationMatrix();
+        w_rot = rm * (ib_inv * (rm.transpose() * l));
+      }
+      const Mat3 r1 = integrate_rotation(q0, w_rot, h).toRotationMatrix();
+      s.w = r1 * (ib_inv * (r1.transpose() * l));
+    }
+    const Quat q = integrate_rotation(orientations_[i], w_rot, h);
     orientations_[i] = q;
     positions_[i] = com - q * lc;
     s.dp += h * s.v;
-    s.dq = integrate_rotation(s.dq, s.w, h);
+    s.dq = integrate_rotation(s.dq, w_rot, h);
   }
 }
 
+void World::order_contacts_top_down() {
+  // Gauss-Seidel carries a load only as far as the order of its rows lets it in one
+  // pass: solved from the top down, the weight of a stack reaches the ground within
+  // the pass; in broadphase order, a heavy box on a light one rocks the light one
+  // loose (measured: a 100:1 two-box stack at 60 Hz falls over in broadphase order,
+  // stands in this one). Key: the height of the manifold's first point against
+  // gravity, highest first, ties by creation order (deterministic). Without gravity
+  // there is no up and the order is left as it is.
+  const Real g = settings_.gravity.norm();
+  const std::size_t n = constraints_.size();
+  if (g == 0 || n < 2) return;
+  const Vec3 up = -settings_.gravity / g;
+  order_scratch_.resize(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    const ContactConstraint& c = constraints_[k];
+    // float keys order the heights to 1e-7 relative, finer than any stack's layers.
+    // Mapped to unsigned so they order like the floats (sign bit set on non-negative
+    // values, all bits flipped on negative ones), then complemented: highest first.
+    const float h = static_cast<float>(up.dot(world_com(c.body_a) + c.points[0].ra));
+    std::uint32_t bits;
+    std::memcpy(&bits, &h, sizeof bits);
+    bits = (bits & 0x80000000u) ? ~bits : (bits | 0x80000000u);
+    order_scratch_[k] = (static_cast<std::uint64_t>(~bits) << 32) | k;
+  }
+  std::sort(order_scratch_.begin(), order_scratch_.end());
+  constraint_scratch_.resize(n);
+  key_scratch_.resize(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    const std::size_t from = order_scratch_[k] & 0xFFFFFFFFu;
+    constraint_scratch_[k] = constraints_[from];
+    key_scratch_[k] = constraint_keys_[from];
+  }
+  constraints_.swap(constraint_scratch_);
+  constraint_keys_.swap(key_scratch_);
+}
+
+Vec3 World::sliding_direction(const Manifold& m, int a, int b, const Vec3& com_a, const Vec3& com_b) const {
+  // The friction rows use one effective mass per tangent, so their combined impulse
+  // points along (m1 t1.v, m2 t2.v) rather than along the slip v; where m1 != m2
+  // (the angular terms differ by direction) sliding friction is misdirected and
+  // weaker than mu N (measured: 5% too little on a 35 degree slope). With t1 along
+  // the slip, as Bullet and Jolt choose it, sliding friction opposes the slip. Slip
+  // below 1e-4 m/s (a tenth of a millimetre per second) is resting contact, where
+  // the basis does not matter: the fixed basis is kept.
+  Vec3 mid = Vec3::Zero();
+  for (int k = 0; k < m.count; ++k) mid += m.points[k].point_a + m.points[k].point_b;
+  mid /= 2 * m.count;
+  const Vec3 v = (linear_velocities_[b] + angular_velocities_[b].cross(mid - com_b)) -
+                 (linear_velocities_[a] + angular_velocities_[a].cross(mid - com_a));
+  const Vec3 vt = v - m.normal.dot(v) * m.normal;
+  const Real len = vt.norm();
+  return len > 1e-4 ? Vec3(vt / len) : Vec3(Vec3::Zero());
+}
 void World::run_step() {
   const int n = body_count();
   const Real dt = settings_.dt;
@@ -572,7 +637,11 @@ void World::run_step() {
         c.body_a = a;
         c.body_b = b;
         c.normal = m.normal;
-        orthonormal_basis(c.normal, c.tangent1, c.tangent2);
+        c.tangent1 = sliding_direction(m, a, b, com_a, com_b);
+        if (c.tangent1.isZero(0))
+          orthonormal_basis(c.normal, c.tangent1, c.tangent2);
+        else
+          c.tangent2 = c.normal.cross(c.tangent1);
         c.friction = mu;
         c.restitution = e;
         c.count = m.count;
@@ -600,6 +669,7 @@ void World::run_step() {
       }
     }
     t.set_count(static_cast<long long>(constraints_.size()));
+    order_contacts_top_down();
   }
 
   // ---- solve: soft step over the substeps. ----

@@ -214,10 +214,14 @@ TEST(World, SleepingOffKeepsEverythingAwake) {
 // default 4 substeps at 60 Hz, one Gauss-Seidel pass per substep lets the stack rock
 // and creep sideways by up to 5 cm. Both are open problems of issue 3, measured rather
 // than hidden here.
+// 8 substeps allow 120 Hz contacts (a quarter of the substep rate); the springs' sag
+// is then 100 g / (2 pi 120)^2 = 1.7 mm for ten unit boxes (measured 1.7 mm down,
+// 1.5 mm sideways). At 60 Hz the sag alone is 6.9 mm and the sideways transient of
+// the first steps 6.6 mm, over the 1 cm bar.
 TEST(World, StackOfTenStands) {
   WorldSettings s;
   s.substeps = 8;
-  s.solver.contact_hertz = 60;
+  s.solver.contact_hertz = 120;
   World w = ground_world(s);
   std::vector<BodyId> ids;
   for (int k = 0; k < 10; ++k) ids.push_back(w.add_body(box_def(Vec3(0.5, 0.5, 0.5), Vec3(0, 0.5 + k, 0))));

@@ -66,9 +66,11 @@ struct WorldSettings {
   Real aabb_margin = 0.1;
   CombineRule friction_combine = CombineRule::kMultiply;
   CombineRule restitution_combine = CombineRule::kMax;
-  /// Gyroscopic term w x (I w) for dynamic bodies, integrated implicitly (one Newton
-  /// step, Catto GDC 2015), so a spinning body keeps its angular momentum. Off by
-  /// default, as in Box2D and Bullet.
+  /// Gyroscopic term w x (I w) for dynamic bodies: each substep's rotation keeps the
+  /// world angular momentum (implicit midpoint on the rotation, see integrate_positions),
+  /// so a free spinning body conserves it to rounding and shows the intermediate-axis
+  /// flip. Off by default, as in Box2D and Bullet (without it, w is constant in free
+  /// flight, which is what a sphere does and what games usually want).
   bool gyroscopic = false;
   BroadphaseType broadphase = BroadphaseType::kAabbTree;
   /// Sleeping (Box2D v3's rule and thresholds): bodies connected by contacts form an
@@ -222,6 +224,10 @@ class World {
   };
 
   int require(BodyId id, const char* what) const;
+  /// Sorts the step's constraints from the top down (see world.cpp).
+  void order_contacts_top_down();
+  /// Unit tangential direction of the slip at manifold m (zero if below 1e-4 m/s).
+  Vec3 sliding_direction(const Manifold& m, int a, int b, const Vec3& com_a, const Vec3& com_b) const;
   Vec3 world_com(int i) const { return positions_[i] + orientations_[i] * masses_[i].local_com; }
   void integrate_velocities(Real h);
   void integrate_positions(Real h);
@@ -273,6 +279,10 @@ class World {
   std::vector<BodyState> states_;
   std::vector<ContactConstraint> constraints_;
   std::vector<std::uint64_t> constraint_keys_;
+  // Scratch of order_contacts_top_down (kept to avoid allocating every step).
+  std::vector<std::uint64_t> order_scratch_;
+  std::vector<ContactConstraint> constraint_scratch_;
+  std::vector<std::uint64_t> key_scratch_;
   std::unordered_map<std::uint64_t, CachedManifold> cache_;
 
   std::array<StageProfile, kStageNames.size()> profile_{};
