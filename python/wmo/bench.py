@@ -19,8 +19,11 @@ Peers are optional imports: one that is not installed is reported and skipped.
 from __future__ import annotations
 
 import csv
+import json
 import math
 import statistics
+import subprocess
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -225,6 +228,104 @@ def run_bench(scene: str = "boxes3000", steps: int = 600, engines: Iterable[str]
         tries.sort(key=lambda r: r.median_ms)
         runs.append(tries[len(tries) // 2])
     return BenchResult(scene, runs, skipped)
+
+
+# ---- memory -------------------------------------------------------------------------
+
+def _status_kib(field_name: str) -> int:
+    """A ``/proc/self/status`` field in KiB (Linux): VmRSS now, VmHWM the peak so far."""
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith(field_name + ":"):
+                return int(line.split()[1])
+    raise OSError(f"/proc/self/status has no {field_name}")
+
+
+_PEER_MODULES = {"wmo": "wmo._core", "pybullet": "pybullet", "mujoco": "mujoco"}
+
+
+def _memory_child(scene: str, engine: str, steps: int, dt: float, iterations: int, substeps: int,
+                  sleeping: bool) -> None:
+    """Runs one engine in this (fresh) process and prints its memory as JSON: the
+    resident set after importing the engine and building nothing (baseline), and the
+    peak resident set after building and stepping the scene."""
+    import importlib
+
+    importlib.import_module(_PEER_MODULES[engine])
+    spec = _scenes.SPECS[scene]()
+    base = _status_kib("VmRSS")
+    run = RUNNERS[engine](spec, steps, dt, iterations, substeps, sleeping)
+    peak = _status_kib("VmHWM")
+    print(json.dumps({"baseline_kib": base, "peak_kib": peak, "bodies": len(spec) + 1,
+                      "max_contacts": max(r.contacts for r in run.records)}))
+
+
+@dataclass
+class MemoryRun:
+    engine: str
+    baseline_bytes: int  #: resident set with the engine imported, before the scene
+    peak_bytes: int  #: peak resident set of the process after building and stepping
+    bodies: int  #: bodies in the scene, ground included
+    max_contacts: int  #: most contact points after any step
+
+    @property
+    def scene_bytes(self) -> int:
+        """Peak growth over the baseline: what the scene and its stepping cost."""
+        return self.peak_bytes - self.baseline_bytes
+
+    @property
+    def bytes_per_body(self) -> float:
+        """Scene bytes over bodies: everything (shapes, state, broadphase, contacts)
+        charged to the bodies, so comparable across engines whatever their layout."""
+        return self.scene_bytes / self.bodies
+
+
+def measure_memory(scene: str = "boxes3000", steps: int = 600, engines: Iterable[str] = ENGINES,
+                   dt: float = 1 / 60, iterations: int = 10, substeps: int = 4,
+                   sleeping: bool = False) -> tuple[list[MemoryRun], dict[str, str]]:
+    """Peak memory of each engine on `scene`, each in a fresh Python process (in one
+    process, memory freed by one engine is reused by the next and hides its cost).
+    Linux only (reads /proc/self/status). Returns the runs and the engines skipped."""
+    if scene not in _scenes.SPECS:
+        raise ValueError(f"scene must be one of {sorted(_scenes.SPECS)}, got {scene!r}")
+    runs, skipped = [], {}
+    for name in engines:
+        if name not in RUNNERS:
+            raise ValueError(f"engine must be one of {list(RUNNERS)}, got {name!r}")
+        code = (f"from wmo import bench; bench._memory_child({scene!r}, {name!r}, {steps}, {dt!r}, "
+                f"{iterations}, {substeps}, {sleeping})")
+        proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+        if proc.returncode != 0:
+            last = (proc.stderr.strip().splitlines() or ["failed"])[-1]
+            skipped[name] = last
+            continue
+        d = json.loads(proc.stdout.strip().splitlines()[-1])
+        runs.append(MemoryRun(name, 1024 * d["baseline_kib"], 1024 * d["peak_kib"], d["bodies"],
+                              d["max_contacts"]))
+    return runs, skipped
+
+
+def memory_summary(scene: str, runs: list[MemoryRun], skipped: dict[str, str]) -> str:
+    lines = [f"memory, scene {scene} (each engine in a fresh process; scene = peak resident "
+             f"set minus the resident set before the scene)",
+             f"{'engine':10s} {'peak MB':>9s} {'scene MB':>9s} {'bytes/body':>11s} {'max contacts':>13s}"]
+    for r in runs:
+        lines.append(f"{r.engine:10s} {r.peak_bytes / 1e6:9.1f} {r.scene_bytes / 1e6:9.1f} "
+                     f"{r.bytes_per_body:11.0f} {r.max_contacts:13d}")
+    for name, why in skipped.items():
+        lines.append(f"{name:10s} skipped: {why}")
+    return "\n".join(lines)
+
+
+def write_memory_csv(scene: str, runs: list[MemoryRun], path: Path) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["scene", "engine", "baseline_bytes", "peak_bytes", "scene_bytes", "bodies",
+                    "bytes_per_body", "max_contact_points"])
+        for r in runs:
+            w.writerow([scene, r.engine, r.baseline_bytes, r.peak_bytes, r.scene_bytes, r.bodies,
+                        "%.1f" % r.bytes_per_body, r.max_contacts])
 
 
 def write_csv(result: BenchResult, path: Path, dt: float) -> None:

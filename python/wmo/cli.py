@@ -45,6 +45,8 @@ def main(argv: list[str] | None = None) -> int:
     b.add_argument("--repeats", type=int, default=1, help="runs per engine; the median run is kept")
     b.add_argument("--sleeping", action="store_true",
                    help="sleeping on (default off: the throughput figure of SCENES.md)")
+    b.add_argument("--memory", action="store_true",
+                   help="also measure each engine's peak memory, in a fresh process each (Linux)")
     args = ap.parse_args(argv)
 
     if args.command == "bench":
@@ -59,7 +61,16 @@ def main(argv: list[str] | None = None) -> int:
         print(result.summary())
         csv_path = args.out / f"{args.scene}_steps.csv"
         bench.write_csv(result, csv_path, args.dt)
-        for p in [csv_path, *bench.plot(result, args.dt, args.out)]:
+        written = [csv_path, *bench.plot(result, args.dt, args.out)]
+        if args.memory:
+            mem, mem_skipped = bench.measure_memory(args.scene, steps=args.steps, engines=engines, dt=args.dt,
+                                                    iterations=args.iterations, substeps=args.substeps,
+                                                    sleeping=args.sleeping)
+            print(bench.memory_summary(args.scene, mem, mem_skipped))
+            mem_path = args.out / f"{args.scene}_memory.csv"
+            bench.write_memory_csv(args.scene, mem, mem_path)
+            written.append(mem_path)
+        for p in written:
             print(f"wrote {p}")
         return 0
     return 2

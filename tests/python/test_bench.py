@@ -54,3 +54,24 @@ def test_command_line(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "wmo", "bench", "pyramid", "--dt", "0"],
                          capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "dt" in bad.stderr
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="memory is read from /proc (Linux)")
+def test_memory_is_measured_in_a_fresh_process(tmp_path):
+    # A small pyramid, a few steps: the child process reports a peak above its
+    # baseline, and the scene's bytes per body are those of real storage (more than
+    # the 7 doubles of a pose, less than a megabyte).
+    runs, skipped = bench.measure_memory("pyramid", steps=3, engines=["wmo"])
+    assert skipped == {}
+    (r,) = runs
+    assert r.engine == "wmo" and r.bodies == 2871
+    assert r.peak_bytes > r.baseline_bytes > 0
+    assert 56 < r.bytes_per_body < 1e6
+    path = tmp_path / "m.csv"
+    bench.write_memory_csv("pyramid", runs, path)
+    rows = list(csv.DictReader(open(path)))
+    assert rows[0]["engine"] == "wmo" and int(rows[0]["bodies"]) == 2871
+    with pytest.raises(ValueError, match="scene"):
+        bench.measure_memory("nope", steps=1)
+    with pytest.raises(ValueError, match="engine"):
+        bench.measure_memory("pyramid", steps=1, engines=["havok"])
