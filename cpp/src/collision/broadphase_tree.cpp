@@ -37,6 +37,11 @@ constexpr std::int32_t kNull = -1;
 /// reinserted when the fat box exceeds the freshly computed one grown by this many
 /// margins, so a box stretched by an earlier fast motion shrinks back once the body
 /// slows down (fewer false candidates), without reinserting on every small change.
+/// The slack also grows by the predicted stretch (multiplier x displacement) itself:
+/// with a fixed slack a body faster than 4 margins per step (24 m/s at 60 Hz) failed
+/// the test every step and was reinserted every step (measured: 10,000 falling spheres
+/// spent 14 ms a step in the broadphase, 1.4 us per body), though its box was stale by
+/// no more than the motion it had been stretched for.
 constexpr Real kShrinkMargins = 4.0;
 
 /// Traversal stack: inline storage for the common case and a heap fallback, so a query
@@ -214,7 +219,9 @@ class AabbTreeBroadphase final : public Broadphase {
     const Aabb& t = tight(id);
     const Aabb& old_fat = nodes_[static_cast<std::size_t>(leaf)].box;
     const Aabb new_fat = fat_box(t, displacement);
-    if (old_fat.contains(t) && new_fat.fattened(kShrinkMargins * settings_.aabb_margin).contains(old_fat))
+    const Real slack = kShrinkMargins * settings_.aabb_margin +
+                       settings_.displacement_multiplier * displacement.cwiseAbs().maxCoeff();
+    if (old_fat.contains(t) && new_fat.fattened(slack).contains(old_fat))
       return;  // the fat box still does its job: no tree change, no pair change
     remove_leaf(leaf);
     nodes_[static_cast<std::size_t>(leaf)].box = new_fat;

@@ -68,6 +68,11 @@ BodyMass compute_body_mass(const BodyDef& def) {
   m.inv_inertia_local = m.inertia_local.inverse();
   if (!m.inv_inertia_local.allFinite() || !std::isfinite(m.inv_mass))
     throw InvalidArgument("mass properties of the shape are degenerate (mass " + num(m.mass) + ")");
+  // Exactly a multiple of the identity: a sphere's or a cube's inertia, computed in
+  // closed form, is; a tilted hull's rarely is, and then it simply counts as anisotropic.
+  const Mat3& I = m.inertia_local;
+  m.isotropic = I(0, 1) == 0 && I(0, 2) == 0 && I(1, 2) == 0 && I(1, 0) == 0 && I(2, 0) == 0 && I(2, 1) == 0 &&
+                I(0, 0) == I(1, 1) && I(1, 1) == I(2, 2);
   return m;
 }
 

@@ -182,6 +182,9 @@ BodyId World::add_body(const BodyDef& def) {
   angular_velocities_.push_back(moving ? def.angular_velocity : Vec3::Zero());
   kinds_.push_back(def.kind);
   masses_.push_back(m);
+  traits_.push_back(static_cast<std::uint8_t>((m.local_com.isZero(0) ? 0 : kComOffset) |
+                                              (m.isotropic ? kIsotropic : 0) |
+                                              (def.linear_damping != 0 || def.angular_damping != 0 ? kHasDamping : 0)));
   shapes_.push_back(def.shape);
   frictions_.push_back(def.friction);
   restitutions_.push_back(def.restitution);
@@ -222,6 +225,7 @@ void World::remove_body(BodyId id) {
   swap_remove(angular_velocities_, i);
   swap_remove(kinds_, i);
   swap_remove(masses_, i);
+  swap_remove(traits_, i);
   swap_remove(shapes_, i);
   swap_remove(frictions_, i);
   swap_remove(restitutions_, i);
@@ -450,31 +454,44 @@ void World::step(int n) {
 }
 
 void World::integrate_velocities(Real h) {
-  const int n = body_count();
-  for (int i = 0; i < n; ++i) {
-    if (!awake_dynamic(i)) continue;  // static, kinematic, sleeping
-    BodyState& s = states_[i];
-    const BodyMass& m = masses_[i];
-    Vec3 v = s.v + h * (gravity_scale_[i] * settings_.gravity + m.inv_mass * forces_[i]);
-    Vec3 w = s.w + h * (s.inv_inertia * torques_[i]);
-    // Damping in the implicit form of Box2D and Jolt: stable for any h * damping.
-    v *= 1 / (1 + h * linear_damping_[i]);
-    w *= 1 / (1 + h * angular_damping_[i]);
-    s.v = v;
-    s.w = w;
-  }
+  for (const int i : coupled_)
+    if (kinds_[i] == BodyKind::kDynamic) integrate_velocity(i, states_[i], body_flags_[i], h);
 }
 
 void World::integrate_positions(Real h) {
-  const int n = body_count();
-  for (int i = 0; i < n; ++i) {
-    if (!awake_[i]) continue;  // static or sleeping
-    BodyState& s = states_[i];
+  for (const int i : coupled_) integrate_position(i, states_[i], body_flags_[i], h);
+}
+
+void World::integrate_velocity(int i, BodyState& s, std::uint8_t f, Real h) const {
+  {
+    s.v += h * gravity_scale_[i] * settings_.gravity;
+    // Forces, torques and damping only where a body has them (flags f).
+    if (f & kHasForce) {
+      s.v += h * masses_[i].inv_mass * forces_[i];
+      s.w += h * (s.inv_inertia * torques_[i]);
+    }
+    if (f & kHasDamping) {
+      // Implicit form of Box2D and Jolt: stable for any h * damping.
+      s.v *= 1 / (1 + h * linear_damping_[i]);
+      s.w *= 1 / (1 + h * angular_damping_[i]);
+    }
+  }
+}
+
+void World::integrate_position(int i, BodyState& s, std::uint8_t f, Real h) {
+  {
+    if (!(f & (kComOffset | kInContact | kGyroscopic))) {
+      // The common case of a body that touches nothing, has its centre of mass at its
+      // origin and no gyroscopic term: the plain semi-implicit Euler update.
+      positions_[i] += h * s.v;
+      orientations_[i] = integrate_rotation(orientations_[i], s.w, h);
+      return;
+    }
     const Vec3& lc = masses_[i].local_com;
     const Vec3 com = positions_[i] + orientations_[i] * lc + h * s.v;
     // The rotation uses w_rot; without the gyroscopic term it is the velocity itself.
     Vec3 w_rot = s.w;
-    if (settings_.gyroscopic && kinds_[i] == BodyKind::kDynamic) {
+    if (f & kGyroscopic) {
       // Torque-free rotation keeps the world angular momentum L = R I R^T w while R
       // turns. Implicit midpoint on the rotation: w_rot = I(R_mid)^-1 L with R_mid
       // the half-substep rotation by w_rot (three fixed-point passes; each gains about
@@ -498,8 +515,10 @@ void World::integrate_positions(Real h) {
     const Quat q = integrate_rotation(orientations_[i], w_rot, h);
     orientations_[i] = q;
     positions_[i] = com - q * lc;
-    s.dp += h * s.v;
-    s.dq = integrate_rotation(s.dq, w_rot, h);
+    if (f & kInContact) {  // the motion since the step's start, for the contact rows
+      s.dp += h * s.v;
+      s.dq = integrate_rotation(s.dq, w_rot, h);
+    }
   }
 }
 
@@ -677,20 +696,56 @@ void World::run_step() {
   for (const ContactConstraint& c : constraints_) points += c.count;
   {
     StageTimer t(profile_[kSolve], points);
-    states_.resize(n);
-    for (int i = 0; i < n; ++i) {
-      BodyState& s = states_[i];
-      s.v = kinds_[i] == BodyKind::kStatic ? Vec3::Zero() : linear_velocities_[i];
-      s.w = kinds_[i] == BodyKind::kStatic ? Vec3::Zero() : angular_velocities_[i];
-      s.dp.setZero();
-      s.dq = Quat::Identity();
-      // Sleeping bodies are in no constraint; they get no inertia (and cost no matrix).
-      const bool active = awake_dynamic(i);
-      s.inv_mass = active ? masses_[i].inv_mass : 0;
-      s.inv_inertia = active ? world_inv_inertia(orientations_[i], masses_[i].inv_inertia_local) : Mat3::Zero();
-    }
     const int substeps = settings_.substeps;
     const Real h = dt / substeps, inv_h = 1 / h;
+    states_.resize(n);
+    body_flags_.assign(n, 0);
+    for (const ContactConstraint& c : constraints_) {
+      body_flags_[c.body_a] |= kInContact;
+      body_flags_[c.body_b] |= kInContact;
+    }
+    coupled_.clear();
+    for (int i = 0; i < n; ++i) {
+      std::uint8_t& f = body_flags_[i];
+      const bool in_contact = f & kInContact;
+      if (!awake_[i] && !in_contact) continue;  // static or sleeping, and in no row
+      const bool dynamic = awake_dynamic(i);
+      f |= traits_[i];
+      if (dynamic && (!forces_[i].isZero(0) || !torques_[i].isZero(0))) f |= kHasForce;
+      if (dynamic && settings_.gyroscopic && !(f & kIsotropic)) f |= kGyroscopic;
+      // Working state. The world inverse inertia only where something reads it:
+      // contact rows and torques.
+      BodyState local;
+      BodyState& st = in_contact ? states_[i] : local;
+      st.v = kinds_[i] == BodyKind::kStatic ? Vec3::Zero() : linear_velocities_[i];
+      st.w = kinds_[i] == BodyKind::kStatic ? Vec3::Zero() : angular_velocities_[i];
+      st.dp.setZero();
+      st.dq = Quat::Identity();
+      st.inv_mass = dynamic ? masses_[i].inv_mass : 0;
+      st.inv_inertia = dynamic && (f & (kInContact | kHasForce))
+                           ? world_inv_inertia(orientations_[i], masses_[i].inv_inertia_local)
+                           : Mat3::Zero();
+      if (in_contact) {
+        if (awake_[i]) coupled_.push_back(i);
+        continue;
+      }
+      // A moving body in no contact is coupled to nothing: all its substeps are done
+      // here in one go on a local copy (its data stays in cache), and the substep
+      // loops below visit only the bodies in contact. Same operations in the same
+      // order either way.
+      for (int sub = 0; sub < substeps; ++sub) {
+        if (dynamic) integrate_velocity(i, st, f, h);
+        integrate_position(i, st, f, h);
+      }
+      if (dynamic) {
+        linear_velocities_[i] = st.v;
+        angular_velocities_[i] = st.w;
+        if (f & kHasForce) {
+          forces_[i].setZero();
+          torques_[i].setZero();
+        }
+      }
+    }
     Softness soft;
     const bool contacts = !constraints_.empty();
     if (contacts) prepare_contacts(constraints_, states_, settings_.solver, h, soft);
@@ -719,8 +774,8 @@ void World::run_step() {
   // ---- store_impulses: velocities back to the arrays, impulses to the cache. ----
   {
     StageTimer t(profile_[kStoreImpulses], points);
-    for (int i = 0; i < n; ++i) {
-      if (!awake_dynamic(i)) continue;
+    for (const int i : coupled_) {  // free bodies stored theirs in the solve stage
+      if (kinds_[i] != BodyKind::kDynamic) continue;
       linear_velocities_[i] = states_[i].v;
       angular_velocities_[i] = states_[i].w;
       forces_[i].setZero();

@@ -52,6 +52,9 @@ struct BodyMass {
   Vec3 local_com = Vec3::Zero();   ///< unit: m, shape local frame
   Mat3 inv_inertia_local = Mat3::Zero();  ///< unit: 1/(kg m^2), about the COM, local axes
   Mat3 inertia_local = Mat3::Zero();      ///< unit: kg m^2, about the COM, local axes
+  /// inertia_local is a multiple of the identity (then R I R^T = I in every frame and
+  /// there is no gyroscopic term).
+  bool isotropic = false;
 };
 
 /// Mass data for a body definition: zero (infinite mass) unless dynamic. Throws

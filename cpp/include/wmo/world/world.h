@@ -229,8 +229,13 @@ class World {
   /// Unit tangential direction of the slip at manifold m (zero if below 1e-4 m/s).
   Vec3 sliding_direction(const Manifold& m, int a, int b, const Vec3& com_a, const Vec3& com_b) const;
   Vec3 world_com(int i) const { return positions_[i] + orientations_[i] * masses_[i].local_com; }
+  /// One substep of h seconds for the bodies in coupled_ (velocities: dynamic ones).
   void integrate_velocities(Real h);
   void integrate_positions(Real h);
+  /// One substep of awake dynamic body i, working state s, flags f.
+  void integrate_velocity(int i, BodyState& s, std::uint8_t f, Real h) const;
+  /// One substep of awake (dynamic or kinematic) body i.
+  void integrate_position(int i, BodyState& s, std::uint8_t f, Real h);
   void run_step();
   void validate_state();
   void wake_island(int island);
@@ -260,6 +265,20 @@ class World {
   // and for a sleeping body its island (index into islands_) and the pose it fell
   // asleep at (a pose written into the arrays afterwards wakes it).
   std::vector<std::uint8_t> awake_;
+  /// Flags of each body, so that the integration skips what a body does not need:
+  /// traits_ (fixed when the body is added) and body_flags_ (the traits plus this
+  /// step's flags, set at the start of the solve stage).
+  enum BodyFlag : std::uint8_t {
+    kInContact = 1,    ///< in at least one contact constraint this step
+    kHasForce = 2,     ///< a force or torque was applied for this step
+    kHasDamping = 4,   ///< nonzero linear or angular damping (trait)
+    kComOffset = 8,    ///< centre of mass away from the body origin (trait)
+    kGyroscopic = 16,  ///< gyroscopic term on and anisotropic inertia
+    kIsotropic = 32,   ///< inertia a multiple of the identity (trait)
+  };
+  std::vector<std::uint8_t> traits_;
+  std::vector<std::uint8_t> body_flags_;
+  std::vector<int> coupled_;  ///< awake bodies in contact this step (the substep loops' bodies)
   std::vector<Real> sleep_time_;
   std::vector<std::int32_t> sleep_island_;
   std::vector<Vec3> sleep_position_;
