@@ -522,40 +522,41 @@ void World::integrate_position(int i, BodyState& s, std::uint8_t f, Real h) {
   }
 }
 
-void World::order_contacts_top_down() {
+void World::order_pairs_top_down() {
   // Gauss-Seidel carries a load only as far as the order of its rows lets it in one
   // pass: solved from the top down, the weight of a stack reaches the ground within
   // the pass; in broadphase order, a heavy box on a light one rocks the light one
   // loose (measured: a 100:1 two-box stack at 60 Hz falls over in broadphase order,
-  // stands in this one). Key: the height of the manifold's first point against
-  // gravity, highest first, ties by creation order (deterministic). Without gravity
-  // there is no up and the order is left as it is.
+  // stands in this one). The pairs are ordered before the narrowphase, so the
+  // constraints are made in that order and never copied. Key: the height of the
+  // pair's upper bottom, max over the two bodies of the lowest point of its box along
+  // up (for a body resting on another, the height of the interface), highest first,
+  // ties in broadphase order (deterministic). Without gravity there is no up and the
+  // broadphase order is kept.
   const Real g = settings_.gravity.norm();
-  const std::size_t n = constraints_.size();
+  const std::size_t n = pairs_.size();
   if (g == 0 || n < 2) return;
   const Vec3 up = -settings_.gravity / g;
+  const Vec3 up_abs = up.cwiseAbs();
+  auto bottom = [&](ProxyId id) {
+    const Aabb& box = broadphase_->aabb(id);
+    return up.dot(box.center()) - up_abs.dot(box.half_extents());
+  };
   order_scratch_.resize(n);
   for (std::size_t k = 0; k < n; ++k) {
-    const ContactConstraint& c = constraints_[k];
     // float keys order the heights to 1e-7 relative, finer than any stack's layers.
     // Mapped to unsigned so they order like the floats (sign bit set on non-negative
     // values, all bits flipped on negative ones), then complemented: highest first.
-    const float h = static_cast<float>(up.dot(world_com(c.body_a) + c.points[0].ra));
+    const float h = static_cast<float>(std::max(bottom(pairs_[k].first), bottom(pairs_[k].second)));
     std::uint32_t bits;
     std::memcpy(&bits, &h, sizeof bits);
     bits = (bits & 0x80000000u) ? ~bits : (bits | 0x80000000u);
     order_scratch_[k] = (static_cast<std::uint64_t>(~bits) << 32) | k;
   }
   std::sort(order_scratch_.begin(), order_scratch_.end());
-  constraint_scratch_.resize(n);
-  key_scratch_.resize(n);
-  for (std::size_t k = 0; k < n; ++k) {
-    const std::size_t from = order_scratch_[k] & 0xFFFFFFFFu;
-    constraint_scratch_[k] = constraints_[from];
-    key_scratch_[k] = constraint_keys_[from];
-  }
-  constraints_.swap(constraint_scratch_);
-  constraint_keys_.swap(key_scratch_);
+  pair_scratch_.resize(n);
+  for (std::size_t k = 0; k < n; ++k) pair_scratch_[k] = pairs_[order_scratch_[k] & 0xFFFFFFFFu];
+  pairs_.swap(pair_scratch_);
 }
 
 Vec3 World::sliding_direction(const Manifold& m, int a, int b, const Vec3& com_a, const Vec3& com_b) const {
@@ -599,6 +600,7 @@ void World::run_step() {
     broadphase_->update();
     pairs_.clear();
     broadphase_->query_pairs(pairs_);
+    order_pairs_top_down();
     t.set_count(static_cast<long long>(pairs_.size()));
   }
 
@@ -688,7 +690,6 @@ void World::run_step() {
       }
     }
     t.set_count(static_cast<long long>(constraints_.size()));
-    order_contacts_top_down();
   }
 
   // ---- solve: soft step over the substeps. ----

@@ -224,8 +224,8 @@ class World {
   };
 
   int require(BodyId id, const char* what) const;
-  /// Sorts the step's constraints from the top down (see world.cpp).
-  void order_contacts_top_down();
+  /// Sorts the step's pairs from the top down (see world.cpp).
+  void order_pairs_top_down();
   /// Unit tangential direction of the slip at manifold m (zero if below 1e-4 m/s).
   Vec3 sliding_direction(const Manifold& m, int a, int b, const Vec3& com_a, const Vec3& com_b) const;
   Vec3 world_com(int i) const { return positions_[i] + orientations_[i] * masses_[i].local_com; }
@@ -298,10 +298,9 @@ class World {
   std::vector<BodyState> states_;
   std::vector<ContactConstraint> constraints_;
   std::vector<std::uint64_t> constraint_keys_;
-  // Scratch of order_contacts_top_down (kept to avoid allocating every step).
+  // Scratch of order_pairs_top_down (kept to avoid allocating every step).
   std::vector<std::uint64_t> order_scratch_;
-  std::vector<ContactConstraint> constraint_scratch_;
-  std::vector<std::uint64_t> key_scratch_;
+  std::vector<ProxyPair> pair_scratch_;
   std::unordered_map<std::uint64_t, CachedManifold> cache_;
 
   std::array<StageProfile, kStageNames.size()> profile_{};
