@@ -44,6 +44,11 @@ constexpr std::int32_t kNull = -1;
 /// no more than the motion it had been stretched for.
 constexpr Real kShrinkMargins = 4.0;
 
+/// flush_pending rebuilds the whole tree when at least 1 / kRebuildFraction of the
+/// leaves (and at least kRebuildMin) wait for reinsertion.
+constexpr int kRebuildFraction = 8;
+constexpr int kRebuildMin = 64;
+
 /// Traversal stack: inline storage for the common case and a heap fallback, so a query
 /// never overflows whatever the tree's shape. An AVL-balanced tree of 2^31 leaves is
 /// < 64 deep and a depth-first traversal holds at most depth + 1 entries, so the
@@ -84,11 +89,18 @@ class AabbTreeBroadphase final : public Broadphase {
 
   void query_aabb(const Aabb& box, AabbQueryCallback callback) const override {
     detail::require_valid_box("box", box);
+    // Moves not yet placed in the tree (pending_) are tested directly: their leaves'
+    // boxes are still the old ones.
+    bool go_on = true;
     query_fat(box, [&](std::int32_t node) {
       const ProxyId id = nodes_[static_cast<std::size_t>(node)].proxy();
-      if (tight(id).overlaps(box)) return callback(id);
+      if (!pending_flag_[static_cast<std::size_t>(id)] && tight(id).overlaps(box)) return go_on = callback(id);
       return true;
     });
+    for (const ProxyId id : pending_list_) {
+      if (!go_on) return;
+      if (pending_flag_[static_cast<std::size_t>(id)] && tight(id).overlaps(box)) go_on = callback(id);
+    }
   }
 
   void raycast(const Vec3& origin, const Vec3& dir, Real max_t,
@@ -104,6 +116,7 @@ class AabbTreeBroadphase final : public Broadphase {
       // max_t shrinks as the callback clips, pruning farther subtrees.
       if (!ray.hits(n.box, max_t, t)) continue;
       if (n.is_leaf()) {
+        if (pending_flag_[static_cast<std::size_t>(n.proxy())]) continue;  // below
         if (!ray.hits(tight(n.proxy()), max_t, t)) continue;
         const Real next = callback(n.proxy(), t);
         if (!(next >= 0)) return;  // negative (or NaN) stops the cast
@@ -113,6 +126,13 @@ class AabbTreeBroadphase final : public Broadphase {
         stack.push(n.child2);
       }
     }
+    for (const ProxyId id : pending_list_) {  // moves not yet placed in the tree
+      Real t;
+      if (!pending_flag_[static_cast<std::size_t>(id)] || !ray.hits(tight(id), max_t, t)) continue;
+      const Real next = callback(id, t);
+      if (!(next >= 0)) return;
+      max_t = next < max_t ? next : max_t;
+    }
   }
 
   BroadphaseStats stats() const override {
@@ -121,12 +141,15 @@ class AabbTreeBroadphase final : public Broadphase {
     s.height = root_ == kNull ? 0 : nodes_[static_cast<std::size_t>(root_)].height;
     s.candidate_pairs = static_cast<int>(candidates_.size());
     s.reinsertions = reinsertions_;
+    s.rebuilds = rebuilds_;
     return s;
   }
 
   void validate() const override {
     Broadphase::validate();
     auto fail = [](const char* what) { throw std::logic_error(std::string("aabb tree: ") + what); };
+    for (const ProxyId id : pending_list_)
+      if (pending_flag_[static_cast<std::size_t>(id)]) fail("moves pending: validate() is for after update()");
     // Free list.
     int free_seen = 0;
     for (std::int32_t f = free_list_; f != kNull; f = nodes_[static_cast<std::size_t>(f)].parent) {
@@ -194,6 +217,8 @@ class AabbTreeBroadphase final : public Broadphase {
     if (i >= leaf_.size()) {
       leaf_.resize(i + 1, kNull);
       changed_.resize(i + 1, 0);
+      pending_flag_.resize(i + 1, 0);
+      pending_box_.resize(i + 1);
     }
     const std::int32_t leaf = allocate_node();
     Node& n = nodes_[static_cast<std::size_t>(leaf)];
@@ -207,6 +232,7 @@ class AabbTreeBroadphase final : public Broadphase {
 
   void on_destroy(ProxyId id) override {
     const auto i = static_cast<std::size_t>(id);
+    pending_flag_[i] = 0;  // its entry in pending_list_ is skipped
     const std::int32_t leaf = leaf_[i];
     remove_leaf(leaf);
     free_node(leaf);
@@ -223,14 +249,19 @@ class AabbTreeBroadphase final : public Broadphase {
                        settings_.displacement_multiplier * displacement.cwiseAbs().maxCoeff();
     if (old_fat.contains(t) && new_fat.fattened(slack).contains(old_fat))
       return;  // the fat box still does its job: no tree change, no pair change
-    remove_leaf(leaf);
-    nodes_[static_cast<std::size_t>(leaf)].box = new_fat;
-    insert_leaf(leaf);
-    ++reinsertions_;
+    // Placed in the tree at the next update (flush_pending): one by one, or all at
+    // once by a rebuild when many bodies left their boxes in the same step.
+    const auto i = static_cast<std::size_t>(id);
+    if (!pending_flag_[i]) {
+      pending_flag_[i] = 1;
+      pending_list_.push_back(id);
+    }
+    pending_box_[i] = new_fat;
     mark_changed(id);
   }
 
   void on_update() override {
+    flush_pending();
     if (changed_list_.empty()) return;  // only moves inside fat boxes: candidates still exact
     // 1. Drop the candidates of every proxy whose fat box changed (moved, created,
     //    destroyed); all other candidates are still exact.
@@ -305,6 +336,83 @@ class AabbTreeBroadphase final : public Broadphase {
   }
 
   Node& node(std::int32_t i) { return nodes_[static_cast<std::size_t>(i)]; }
+
+  /// Places the pending moves in the tree. Reinserting a leaf costs a descent, an
+  /// insertion and a refit to the root (~2 us at 10,000 leaves); a top-down rebuild of
+  /// the whole tree costs about as much as reinserting an eighth of it, so when more
+  /// leaves than that moved out of their boxes at once (bodies falling together leave
+  /// their boxes in the same step) the tree is rebuilt instead. Measured: 10,000
+  /// spheres in free fall, 5.7 ms a step in the broadphase with reinsertions alone.
+  void flush_pending() {
+    int live = 0;
+    for (const ProxyId id : pending_list_) live += pending_flag_[static_cast<std::size_t>(id)];
+    if (live > 0 && live >= kRebuildMin && live * kRebuildFraction >= proxy_count()) {
+      for (const ProxyId id : pending_list_) {
+        const auto i = static_cast<std::size_t>(id);
+        if (!pending_flag_[i]) continue;
+        node(leaf_[i]).box = pending_box_[i];
+        pending_flag_[i] = 0;
+      }
+      reinsertions_ += live;
+      ++rebuilds_;
+      rebuild();
+    } else {
+      for (const ProxyId id : pending_list_) {
+        const auto i = static_cast<std::size_t>(id);
+        if (!pending_flag_[i]) continue;
+        const std::int32_t leaf = leaf_[i];
+        remove_leaf(leaf);
+        node(leaf).box = pending_box_[i];
+        insert_leaf(leaf);
+        pending_flag_[i] = 0;
+        ++reinsertions_;
+      }
+    }
+    pending_list_.clear();
+  }
+
+  /// Rebuilds the tree top down over the current leaves: median split on the widest
+  /// axis of the leaf centres (ties by node index, so the result is deterministic).
+  /// Balanced (height ceil(log2 n)); internal nodes are reused from the free list.
+  void rebuild() {
+    build_leaves_.clear();
+    for (ProxyId id = 0; id < id_capacity(); ++id)
+      if (is_live(id)) build_leaves_.push_back(leaf_[static_cast<std::size_t>(id)]);
+    for (std::size_t i = 0; i < nodes_.size(); ++i)
+      if (nodes_[i].height > 0) free_node(static_cast<std::int32_t>(i));
+    root_ = build_leaves_.empty() ? kNull : build(0, static_cast<int>(build_leaves_.size()));
+    if (root_ != kNull) node(root_).parent = kNull;
+  }
+
+  std::int32_t build(int begin, int count) {
+    std::int32_t* first = build_leaves_.data() + begin;
+    if (count == 1) return first[0];
+    Vec3 lo = Vec3::Constant(kInf), hi = Vec3::Constant(-kInf);
+    for (int k = 0; k < count; ++k) {
+      const Vec3 c = node(first[k]).box.center();
+      lo = lo.cwiseMin(c);
+      hi = hi.cwiseMax(c);
+    }
+    int axis = 0;
+    (hi - lo).maxCoeff(&axis);
+    const int half = count / 2;
+    std::nth_element(first, first + half, first + count, [&](std::int32_t x, std::int32_t y) {
+      const Real cx = node(x).box.min[axis] + node(x).box.max[axis];
+      const Real cy = node(y).box.min[axis] + node(y).box.max[axis];
+      return cx < cy || (cx == cy && x < y);
+    });
+    const std::int32_t left = build(begin, half);
+    const std::int32_t right = build(begin + half, count - half);
+    const std::int32_t p = allocate_node();  // from the freed internal nodes: no reallocation
+    Node& n = node(p);
+    n.child1 = left;
+    n.child2 = right;
+    n.height = 1 + std::max(node(left).height, node(right).height);
+    n.box = Aabb::merge(node(left).box, node(right).box);
+    node(left).parent = p;
+    node(right).parent = p;
+    return p;
+  }
 
   std::int32_t allocate_node() {
     if (free_list_ == kNull) {
@@ -510,6 +618,11 @@ class AabbTreeBroadphase final : public Broadphase {
   std::vector<ProxyPair> merged_;        // scratch for on_update
   std::vector<HeapItem> heap_;           // scratch for find_best_sibling
   std::int64_t reinsertions_ = 0;
+  std::int64_t rebuilds_ = 0;
+  std::vector<std::uint8_t> pending_flag_;  // by proxy id: moved out of its fat box, not yet placed
+  std::vector<Aabb> pending_box_;           // by proxy id: its new fat box while pending
+  std::vector<ProxyId> pending_list_;       // ids flagged (possibly destroyed since: flag cleared)
+  std::vector<std::int32_t> build_leaves_;  // scratch for rebuild
 };
 
 }  // namespace

@@ -706,6 +706,35 @@ void World::run_step() {
       body_flags_[c.body_b] |= kInContact;
     }
     coupled_.clear();
+    // A moving body in no contact is coupled to nothing: all its substeps are done
+    // here, on a local copy, and the substep loops below visit only the bodies in
+    // contact. Free bodies go in blocks of kFreeBlock, substep by substep within a
+    // block: one body's substeps form a chain of dependent divisions and square roots
+    // (quaternion normalisation), a block's bodies are independent and overlap.
+    // Same operations in the same order for each body either way.
+    constexpr int kFreeBlock = 8;
+    std::array<BodyState, kFreeBlock> block;
+    std::array<int, kFreeBlock> block_body{};
+    int block_size = 0;
+    auto flush_block = [&] {
+      for (int sub = 0; sub < substeps; ++sub)
+        for (int j = 0; j < block_size; ++j) {
+          const int i = block_body[j];
+          if (kinds_[i] == BodyKind::kDynamic) integrate_velocity(i, block[j], body_flags_[i], h);
+          integrate_position(i, block[j], body_flags_[i], h);
+        }
+      for (int j = 0; j < block_size; ++j) {
+        const int i = block_body[j];
+        if (kinds_[i] != BodyKind::kDynamic) continue;
+        linear_velocities_[i] = block[j].v;
+        angular_velocities_[i] = block[j].w;
+        if (body_flags_[i] & kHasForce) {
+          forces_[i].setZero();
+          torques_[i].setZero();
+        }
+      }
+      block_size = 0;
+    };
     for (int i = 0; i < n; ++i) {
       std::uint8_t& f = body_flags_[i];
       const bool in_contact = f & kInContact;
@@ -716,8 +745,7 @@ void World::run_step() {
       if (dynamic && settings_.gyroscopic && !(f & kIsotropic)) f |= kGyroscopic;
       // Working state. The world inverse inertia only where something reads it:
       // contact rows and torques.
-      BodyState local;
-      BodyState& st = in_contact ? states_[i] : local;
+      BodyState& st = in_contact ? states_[i] : block[block_size];
       st.v = kinds_[i] == BodyKind::kStatic ? Vec3::Zero() : linear_velocities_[i];
       st.w = kinds_[i] == BodyKind::kStatic ? Vec3::Zero() : angular_velocities_[i];
       st.dp.setZero();
@@ -730,23 +758,10 @@ void World::run_step() {
         if (awake_[i]) coupled_.push_back(i);
         continue;
       }
-      // A moving body in no contact is coupled to nothing: all its substeps are done
-      // here in one go on a local copy (its data stays in cache), and the substep
-      // loops below visit only the bodies in contact. Same operations in the same
-      // order either way.
-      for (int sub = 0; sub < substeps; ++sub) {
-        if (dynamic) integrate_velocity(i, st, f, h);
-        integrate_position(i, st, f, h);
-      }
-      if (dynamic) {
-        linear_velocities_[i] = st.v;
-        angular_velocities_[i] = st.w;
-        if (f & kHasForce) {
-          forces_[i].setZero();
-          torques_[i].setZero();
-        }
-      }
+      block_body[block_size++] = i;
+      if (block_size == kFreeBlock) flush_block();
     }
+    flush_block();
     Softness soft;
     const bool contacts = !constraints_.empty();
     if (contacts) prepare_contacts(constraints_, states_, settings_.solver, h, soft);

@@ -527,9 +527,58 @@ TEST(AabbTree, ReinsertsOnlyWhenLeavingFatBox) {
   }
   EXPECT_EQ(bp->stats().reinsertions, 0);
   bp->move_proxy(id, Aabb(box.min + Vec3(0.11, 0, 0), box.max + Vec3(0.11, 0, 0)));  // leaves it
+  bp->update();  // moves out of fat boxes are placed in the tree here
   EXPECT_EQ(bp->stats().reinsertions, 1);
-  bp->update();
+  EXPECT_EQ(bp->stats().rebuilds, 0);
   bp->validate();
+}
+
+// Many leaves leaving their boxes at once rebuild the tree; pairs, queries and rays
+// stay exact, before the update (moves pending) and after it.
+TEST(AabbTree, MassMovesRebuildAndStayExact) {
+  Scene scene(77, 20.0, Vec3::Zero());
+  auto tree = make_broadphase(BroadphaseType::kAabbTree);
+  auto brute = make_broadphase(BroadphaseType::kBruteForce);
+  std::vector<Aabb> boxes;
+  for (int i = 0; i < 400; ++i) {
+    boxes.push_back(scene.random_body().box());
+    tree->create_proxy(boxes.back());
+    brute->create_proxy(boxes.back());
+  }
+  std::vector<ProxyPair> a, b;
+  tree->query_pairs(a);
+  for (int frame = 0; frame < 5; ++frame) {
+    // Everything moves 1.5 m: far out of the 0.1 m fat boxes.
+    const Vec3 d(1.5, -1.5 * frame, 0.5);
+    for (int i = 0; i < 400; ++i) {
+      const Aabb moved(boxes[i].min + d, boxes[i].max + d);
+      tree->move_proxy(i, moved);
+      brute->move_proxy(i, moved);
+      boxes[i] = moved;
+    }
+    // Queries before the update see the moved boxes.
+    const Aabb probe(boxes[7].min, boxes[7].min + Vec3::Constant(0.5));
+    std::vector<ProxyId> qt, qb;
+    tree->query_aabb(probe, [&](ProxyId id) { qt.push_back(id); return true; });
+    brute->query_aabb(probe, [&](ProxyId id) { qb.push_back(id); return true; });
+    std::sort(qt.begin(), qt.end());
+    std::sort(qb.begin(), qb.end());
+    EXPECT_EQ(qt, qb);
+    std::vector<ProxyId> rt, rb;
+    const Vec3 origin = boxes[3].center() - Vec3(30, 0, 0);
+    tree->raycast(origin, Vec3::UnitX(), 60, [&](ProxyId id, Real) { rt.push_back(id); return Real(60); });
+    brute->raycast(origin, Vec3::UnitX(), 60, [&](ProxyId id, Real) { rb.push_back(id); return Real(60); });
+    std::sort(rt.begin(), rt.end());
+    std::sort(rb.begin(), rb.end());
+    EXPECT_EQ(rt, rb);
+    EXPECT_FALSE(rt.empty());
+    tree->query_pairs(a);
+    brute->query_pairs(b);
+    EXPECT_EQ(a, b) << "frame " << frame;
+    tree->validate();
+  }
+  EXPECT_EQ(tree->stats().rebuilds, 5);
+  EXPECT_EQ(tree->stats().reinsertions, 5 * 400);
 }
 
 TEST(AabbTree, ResultsIndependentOfMargin) {

@@ -82,7 +82,10 @@ struct BroadphaseStats {
   int node_count = 0;       ///< tree: live nodes (2 * leaves - 1)
   int height = 0;           ///< tree: height of the root (a single leaf has height 0)
   int candidate_pairs = 0;  ///< tree: pairs whose FAT boxes overlap (a superset of pairs)
-  std::int64_t reinsertions = 0;  ///< tree: leaf reinsertions since creation
+  /// tree: leaves placed anew since creation (moved out of their fat boxes; counted
+  /// at the update that places them, one by one or by a rebuild)
+  std::int64_t reinsertions = 0;
+  std::int64_t rebuilds = 0;  ///< tree: whole-tree rebuilds since creation (mass moves)
   int sweep_axis = -1;      ///< sweep and prune: current sweep axis (0 = x, 1 = y, 2 = z)
   std::int64_t axis_changes = 0;  ///< sweep and prune: sweep axis switches since creation
 };
