@@ -147,6 +147,8 @@ friction_combine, restitution_combine : 'multiply' (default for friction, Bullet
 gyroscopic : integrate the gyroscopic term (default False): rotations keep the world
     angular momentum (to rounding in free flight), so a spin about the intermediate
     axis flips; without it the angular velocity is constant in free flight.
+threads : threads for the parallel stages (the narrowphase), the caller's included
+    (default 1). Results are bit-identical for any count.
 sleeping : put resting islands to sleep (default True): an island whose bodies all move
     slower than sleep_linear_threshold (m/s, default 0.05) and sleep_angular_threshold
     (rad/s, default 2 deg/s) for time_to_sleep (s, default 0.5) sleeps and costs nothing
@@ -161,7 +163,8 @@ are zero-copy, writable views; see the module notes on their lifetime.
                        double contact_hertz, double contact_damping_ratio, double contact_push_max,
                        double restitution_threshold, double speculative_distance, const std::string& friction_combine,
                        const std::string& restitution_combine, bool gyroscopic, bool sleeping,
-                       double sleep_linear_threshold, double sleep_angular_threshold, double time_to_sleep) {
+                       double sleep_linear_threshold, double sleep_angular_threshold, double time_to_sleep,
+                       int threads) {
              WorldSettings s;
              s.gravity = gravity.is_none() ? Vec3(0, -9.81, 0) : to_vec3(gravity, "gravity");
              s.dt = dt;
@@ -180,6 +183,7 @@ are zero-copy, writable views; see the module notes on their lifetime.
              s.sleep_linear_threshold = sleep_linear_threshold;
              s.sleep_angular_threshold = sleep_angular_threshold;
              s.time_to_sleep = time_to_sleep;
+             s.threads = threads;
              return std::make_unique<World>(s);
            }),
            py::arg("gravity") = py::none(), py::arg("dt") = 1.0 / 60, py::arg("substeps") = 4,
@@ -188,7 +192,8 @@ are zero-copy, writable views; see the module notes on their lifetime.
            py::arg("restitution_threshold") = 1.0, py::arg("speculative_distance") = 0.04,
            py::arg("friction_combine") = "multiply", py::arg("restitution_combine") = "max",
            py::arg("gyroscopic") = false, py::arg("sleeping") = true, py::arg("sleep_linear_threshold") = 0.05,
-           py::arg("sleep_angular_threshold") = 2 * kPi / 180, py::arg("time_to_sleep") = 0.5)
+           py::arg("sleep_angular_threshold") = 2 * kPi / 180, py::arg("time_to_sleep") = 0.5,
+           py::arg("threads") = 1)
       .def(
           "add_body",
           [](py::object self, std::shared_ptr<Shape> shape, py::object position, py::object orientation,

@@ -231,7 +231,8 @@ class World:
                  speculative_distance: float = 0.04, friction_combine: str = "multiply",
                  restitution_combine: str = "max", gyroscopic: bool = False,
                  sleeping: bool = True, sleep_linear_threshold: float = 0.05,
-                 sleep_angular_threshold: float = 0.0349, time_to_sleep: float = 0.5) -> None: ...
+                 sleep_angular_threshold: float = 0.0349, time_to_sleep: float = 0.5,
+                 threads: int = 1) -> None: ...
     def add_body(self, shape: Shape, position: npt.ArrayLike | None = None,
                  orientation: npt.ArrayLike | None = None, kind: str = "dynamic",
                  mass: float | None = None, density: float = 1000.0, friction: float = 0.5,

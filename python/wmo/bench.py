@@ -62,12 +62,17 @@ class EngineRun:
 
 # ---- WMO ------------------------------------------------------------------------------
 
+#: Threads WMO steps with (its narrowphase is parallel; peers run single-threaded).
+WMO_THREADS = 1
+
+
 def run_wmo(spec: _scenes.BoxScene, steps: int, dt: float, iterations: int, substeps: int,
             sleeping: bool) -> EngineRun:
-    world = _scenes.build(spec, dt=dt, substeps=substeps, iterations=1, sleeping=sleeping)
+    world = _scenes.build(spec, dt=dt, substeps=substeps, iterations=1, sleeping=sleeping,
+                          threads=WMO_THREADS)
     run = EngineRun("wmo", f"wmo {_version()}",
                     f"dt {dt:g}, {substeps} substeps x 1 iteration + 1 relax, "
-                    f"sleeping {'on' if sleeping else 'off'}")
+                    f"sleeping {'on' if sleeping else 'off'}, {WMO_THREADS} thread(s)")
     for k in range(steps):
         t0 = time.perf_counter()
         world.step()
@@ -188,7 +193,7 @@ class BenchResult:
 
     def summary(self) -> str:
         steps = len(self.runs[0].records) if self.runs else 0
-        lines = [f"scene {self.scene}: {steps} steps, single thread"]
+        lines = [f"scene {self.scene}: {steps} steps, WMO on {WMO_THREADS} thread(s), peers on one"]
         base = next((r for r in self.runs if r.engine == "wmo"), None)
         lines.append(f"{'engine':10s} {'median ms':>10s} {'steps/s':>9s} {'max contacts':>13s} "
                      f"{'deepest pen. m':>15s}  ratio to wmo   build / settings")

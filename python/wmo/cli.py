@@ -45,12 +45,18 @@ def main(argv: list[str] | None = None) -> int:
     b.add_argument("--repeats", type=int, default=1, help="runs per engine; the median run is kept")
     b.add_argument("--sleeping", action="store_true",
                    help="sleeping on (default off: the throughput figure of SCENES.md)")
+    b.add_argument("--threads", type=int, default=1,
+                   help="threads for WMO (default 1; the peers run single-threaded)")
     b.add_argument("--memory", action="store_true",
                    help="also measure each engine's peak memory, in a fresh process each (Linux)")
     args = ap.parse_args(argv)
 
     if args.command == "bench":
         engines = [e for e in args.engines.split(",") if e]
+        if args.threads < 1:
+            print(f"wmo bench: threads must be >= 1, got {args.threads}", file=sys.stderr)
+            return 2
+        bench.WMO_THREADS = args.threads
         try:
             result = bench.run_bench(args.scene, steps=args.steps, engines=engines, dt=args.dt,
                                      iterations=args.iterations, substeps=args.substeps,

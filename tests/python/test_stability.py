@@ -33,6 +33,21 @@ def test_determinism_same_scene_twice_gives_the_same_bits():
     assert state_hash(w) != hashes[0]  # the hash does see the state
 
 
+def test_determinism_one_and_two_threads_give_the_same_bits():
+    # The hash test: the narrowphase splits the pairs into fixed parts and
+    # joins them in order, so the thread count cannot change a bit of the result.
+    # Enough pairs (a 200-body pile and 400 boxes) that the parallel path is taken.
+    hashes = {}
+    for threads in (1, 2):
+        w = scenes.mixed_pile(count=200, seed=3, threads=threads)
+        w.step(200)
+        b = scenes.boxes3000(layers=6, threads=threads, sleeping=False)
+        b.step(200)
+        assert b.profile["narrowphase"]["count"] > 64
+        hashes[threads] = (state_hash(w), state_hash(b))
+    assert hashes[1] == hashes[2]
+
+
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_random_scenes_never_produce_nan_or_escape(seed):
     # 10,000 steps of a random pile (spheres, capsules, hulls) dropped into a closed

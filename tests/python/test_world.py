@@ -156,7 +156,7 @@ def test_bad_body_raises_and_adds_nothing(kwargs, field):
 @pytest.mark.parametrize("kwargs, field", [
     (dict(dt=0.0), "dt"), (dict(dt=float("nan")), "dt"), (dict(substeps=0), "substeps"),
     (dict(iterations=-1), "iterations"), (dict(gravity=(0, float("nan"), 0)), "gravity"),
-    (dict(friction_combine="median"), "median"),
+    (dict(friction_combine="median"), "median"), (dict(threads=0), "threads"),
 ])
 def test_bad_settings_raise(kwargs, field):
     with pytest.raises(ValueError, match=field):

@@ -1,6 +1,8 @@
 // The world: handles, dense body storage and the step's stages (world.h).
 #include "wmo/world/world.h"
 
+#include "wmo/world/thread_pool.h"
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -95,6 +97,8 @@ void validate_world_settings(const WorldSettings& s) {
   require_positive("dt", s.dt);
   if (s.substeps < 1) throw InvalidArgument("substeps must be >= 1, got " + std::to_string(s.substeps));
   if (s.iterations < 1) throw InvalidArgument("iterations must be >= 1, got " + std::to_string(s.iterations));
+  if (s.threads < 1 || s.threads > 256)
+    throw InvalidArgument("threads must be in [1, 256], got " + std::to_string(s.threads));
   if (s.relax_iterations < 0)
     throw InvalidArgument("relax_iterations must be >= 0, got " + std::to_string(s.relax_iterations));
   require_non_negative("contact_hertz", s.solver.contact_hertz);
@@ -113,6 +117,7 @@ World::World(const WorldSettings& settings) : settings_(settings) {
   BroadphaseSettings bs;
   bs.aabb_margin = settings_.aabb_margin;
   broadphase_ = make_broadphase(settings_.broadphase, bs);
+  if (settings_.threads > 1) pool_ = std::make_unique<ThreadPool>(settings_.threads);
 }
 
 void World::set_settings(const WorldSettings& s) {
@@ -128,6 +133,7 @@ void World::set_settings(const WorldSettings& s) {
     }
     broadphase_ = std::move(bp);
   }
+  if (s.threads != settings_.threads) pool_ = s.threads > 1 ? std::make_unique<ThreadPool>(s.threads) : nullptr;
   settings_ = s;
   if (!settings_.enable_sleep)
     for (int k = 0; k < static_cast<int>(islands_.size()); ++k)
@@ -559,6 +565,58 @@ void World::order_pairs_top_down() {
   pairs_.swap(pair_scratch_);
 }
 
+void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseOut& out) const {
+  CollideSettings cs;
+  cs.margin = margin;
+  out.manifolds.clear();
+  collide(*shapes_[a], Pose(positions_[a], orientations_[a]), *shapes_[b], Pose(positions_[b], orientations_[b]),
+          out.manifolds, cs);
+  if (out.manifolds.empty()) return;
+  const Vec3 com_a = world_com(a), com_b = world_com(b);
+  const Real mu = combine(settings_.friction_combine, frictions_[a], frictions_[b]);
+  const Real e = combine(settings_.restitution_combine, restitutions_[a], restitutions_[b]);
+  for (const Manifold& m : out.manifolds) {
+    if (m.count == 0) continue;
+    // Key: slots (24 bits each) and the composite children (16 bits, wrapped).
+    const std::uint64_t key = (static_cast<std::uint64_t>(sa) << 40) | (static_cast<std::uint64_t>(sb) << 16) |
+                              ((static_cast<std::uint64_t>(m.child_a) & 0xFF) << 8) |
+                              (static_cast<std::uint64_t>(m.child_b) & 0xFF);
+    const auto cached = cache_.find(key);
+    ContactConstraint& c = out.constraints.emplace_back();
+    c.body_a = a;
+    c.body_b = b;
+    c.normal = m.normal;
+    c.tangent1 = sliding_direction(m, a, b, com_a, com_b);
+    if (c.tangent1.isZero(0))
+      orthonormal_basis(c.normal, c.tangent1, c.tangent2);
+    else
+      c.tangent2 = c.normal.cross(c.tangent1);
+    c.friction = mu;
+    c.restitution = e;
+    c.count = m.count;
+    for (int k = 0; k < m.count; ++k) {
+      const ContactPoint& cp = m.points[k];
+      ContactConstraintPoint& p = c.points[k];
+      const Vec3 mid = 0.5 * (cp.point_a + cp.point_b);
+      p.ra = mid - com_a;
+      p.rb = mid - com_b;
+      p.adjusted_separation = -cp.depth - m.normal.dot(p.rb - p.ra);
+      p.feature_id = cp.feature_id;
+      if (cached != cache_.end()) {
+        for (int j = 0; j < cached->second.count; ++j) {
+          const CachedPoint& old = cached->second.points[j];
+          if (old.feature_id == cp.feature_id) {
+            p.normal_impulse = old.normal_impulse;
+            p.tangent_impulse = {c.tangent1.dot(old.tangent_impulse), c.tangent2.dot(old.tangent_impulse)};
+            break;
+          }
+        }
+      }
+    }
+    out.keys.push_back(key);
+  }
+}
+
 Vec3 World::sliding_direction(const Manifold& m, int a, int b, const Vec3& com_a, const Vec3& com_b) const {
   // The friction rows use one effective mass per tangent, so their combined impulse
   // points along (m1 t1.v, m2 t2.v) rather than along the slip v; where m1 != m2
@@ -633,61 +691,38 @@ void World::run_step() {
         }
       }
     }
-    CollideSettings cs;
-    cs.margin = spec;
-    for (const ProxyPair& pp : pairs_) {
-      const auto [sa, sb, a, b] = rows(pp);
-      // At least one awake dynamic body: pairs of sleeping, static and kinematic
-      // bodies need no contact.
-      if (!awake_dynamic(a) && !awake_dynamic(b)) continue;
-      manifolds_scratch_.clear();
-      collide(*shapes_[a], Pose(positions_[a], orientations_[a]), *shapes_[b], Pose(positions_[b], orientations_[b]),
-              manifolds_scratch_, cs);
-      if (manifolds_scratch_.empty()) continue;
-      const Vec3 com_a = world_com(a), com_b = world_com(b);
-      const Real mu = combine(settings_.friction_combine, frictions_[a], frictions_[b]);
-      const Real e = combine(settings_.restitution_combine, restitutions_[a], restitutions_[b]);
-      for (const Manifold& m : manifolds_scratch_) {
-        if (m.count == 0) continue;
-        // Key: slots (24 bits each) and the composite children (16 bits, wrapped).
-        const std::uint64_t key = (static_cast<std::uint64_t>(sa) << 40) | (static_cast<std::uint64_t>(sb) << 16) |
-                                  ((static_cast<std::uint64_t>(m.child_a) & 0xFF) << 8) |
-                                  (static_cast<std::uint64_t>(m.child_b) & 0xFF);
-        const auto cached = cache_.find(key);
-        ContactConstraint c;
-        c.body_a = a;
-        c.body_b = b;
-        c.normal = m.normal;
-        c.tangent1 = sliding_direction(m, a, b, com_a, com_b);
-        if (c.tangent1.isZero(0))
-          orthonormal_basis(c.normal, c.tangent1, c.tangent2);
-        else
-          c.tangent2 = c.normal.cross(c.tangent1);
-        c.friction = mu;
-        c.restitution = e;
-        c.count = m.count;
-        for (int k = 0; k < m.count; ++k) {
-          const ContactPoint& cp = m.points[k];
-          ContactConstraintPoint& p = c.points[k];
-          const Vec3 mid = 0.5 * (cp.point_a + cp.point_b);
-          p.ra = mid - com_a;
-          p.rb = mid - com_b;
-          p.adjusted_separation = -cp.depth - m.normal.dot(p.rb - p.ra);
-          p.feature_id = cp.feature_id;
-          if (cached != cache_.end()) {
-            for (int j = 0; j < cached->second.count; ++j) {
-              const CachedPoint& old = cached->second.points[j];
-              if (old.feature_id == cp.feature_id) {
-                p.normal_impulse = old.normal_impulse;
-                p.tangent_impulse = {c.tangent1.dot(old.tangent_impulse), c.tangent2.dot(old.tangent_impulse)};
-                break;
-              }
-            }
-          }
-        }
-        constraints_.push_back(c);
-        constraint_keys_.push_back(key);
+    // The pairs in contiguous parts, one per thread, each into its own buffers, then
+    // joined in part order: the same constraints in the same order for any number of
+    // threads. Everything read here is read-only during the stage (shapes, poses,
+    // materials, the cache); collide() keeps its scratch per thread.
+    const int parts = pool_ ? pool_->size() : 1;
+    if (static_cast<int>(thread_out_.size()) < parts) thread_out_.resize(parts);
+    auto part = [&](int t) {
+      NarrowphaseOut& out = thread_out_[t];
+      out.constraints.clear();
+      out.keys.clear();
+      const auto [begin, end] = ThreadPool::part(pairs_.size(), t, parts);
+      for (std::size_t k = begin; k < end; ++k) {
+        const auto [sa, sb, a, b] = rows(pairs_[k]);
+        // At least one awake dynamic body: pairs of sleeping, static and kinematic
+        // bodies need no contact.
+        if (!awake_dynamic(a) && !awake_dynamic(b)) continue;
+        collide_pair(sa, sb, a, b, spec, out);
       }
+    };
+    if (parts > 1 && pairs_.size() >= kMinParallelPairs) {
+      pool_->run(part);
+    } else {
+      for (int t = 1; t < parts; ++t) {
+        thread_out_[t].constraints.clear();
+        thread_out_[t].keys.clear();
+      }
+      part(0);
+      for (int t = 1; t < parts; ++t) part(t);
+    }
+    for (int t = 0; t < parts; ++t) {
+      constraints_.insert(constraints_.end(), thread_out_[t].constraints.begin(), thread_out_[t].constraints.end());
+      constraint_keys_.insert(constraint_keys_.end(), thread_out_[t].keys.begin(), thread_out_[t].keys.end());
     }
     t.set_count(static_cast<long long>(constraints_.size()));
   }

@@ -31,6 +31,7 @@
 #include "wmo/dynamics/body.h"
 #include "wmo/dynamics/contact_solver.h"
 #include "wmo/world/shared_array.h"
+#include "wmo/world/thread_pool.h"
 
 namespace wmo {
 
@@ -73,6 +74,10 @@ struct WorldSettings {
   /// flight, which is what a sphere does and what games usually want).
   bool gyroscopic = false;
   BroadphaseType broadphase = BroadphaseType::kAabbTree;
+  /// Threads for the step's parallel stages (the narrowphase), the caller's included.
+  /// Results are bit-identical for any count: work is split into fixed parts and
+  /// joined in order. 1 (the default) starts no thread.
+  int threads = 1;
   /// Sleeping (Box2D v3's rule and thresholds): bodies connected by contacts form an
   /// island; when every body of an island has moved slower than both thresholds for
   /// `time_to_sleep`, the island sleeps: its velocities are zeroed and it costs nothing
@@ -224,6 +229,17 @@ class World {
   };
 
   int require(BodyId id, const char* what) const;
+  /// Narrowphase output of one thread.
+  struct NarrowphaseOut {
+    std::vector<Manifold> manifolds;  // scratch of collide()
+    std::vector<ContactConstraint> constraints;
+    std::vector<std::uint64_t> keys;
+  };
+  /// Contact constraints of one pair (slots sa < sb, rows a, b) appended to out.
+  void collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseOut& out) const;
+  /// Below this many pairs the narrowphase runs on the calling thread alone (waking
+  /// the workers costs ~10 us).
+  static constexpr std::size_t kMinParallelPairs = 64;
   /// Sorts the step's pairs from the top down (see world.cpp).
   void order_pairs_top_down();
   /// Unit tangential direction of the slip at manifold m (zero if below 1e-4 m/s).
@@ -294,7 +310,8 @@ class World {
 
   // Step scratch and contact cache.
   std::vector<ProxyPair> pairs_;
-  std::vector<Manifold> manifolds_scratch_;
+  std::vector<NarrowphaseOut> thread_out_;
+  std::unique_ptr<ThreadPool> pool_;  ///< null with threads = 1
   std::vector<BodyState> states_;
   std::vector<ContactConstraint> constraints_;
   std::vector<std::uint64_t> constraint_keys_;
