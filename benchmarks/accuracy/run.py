@@ -1,24 +1,28 @@
-"""What accuracy costs in time (issue 3, section 6), WMO's side: each accuracy knob of the
-world (time step, substeps, velocity iterations) swept one at a time from the defaults
-(dt 1/60 s, 4 substeps, 1 iteration) on cases with a known answer, measuring the error
-against the cost in milliseconds of wall time per simulated second.
+"""What accuracy costs in time (issue 3, section 6): each accuracy knob of the world (time
+step, substeps, velocity iterations) swept one at a time from the defaults (dt 1/60 s, 4
+substeps, 1 iteration) on cases with a known answer, measuring the error against the
+cost in milliseconds of wall time per simulated second; the same cases in PyBullet and
+MuJoCo (their dt and solver iterations swept, peers.py) on the same axes.
 
 Cases (the error is in metres or a relative number, as stated):
   bounce   a ball (restitution 0.5) dropped from 1 m onto the ground: relative error of
-           the first rebound height against e^2 h (PyBullet and MuJoCo are not run yet).
+           the first rebound height against e^2 h (not in MuJoCo: no restitution setting).
   slide    a box launched at 5 m/s on ground with pair friction 0.25: error of the
            stopping distance against v^2 / (2 mu g) (m).
   stack10  10 unit boxes stacked face to face, 5 s: the largest displacement of a box
            centre (m; a standing stack stays at the millimetre level).
   pyramid10  the SCENES.md pyramid with 10 layers (385 boxes), 5 s: the same measure.
 
-Writes results/accuracy/accuracy.csv and one PNG per case (error against cost, one
-series per knob). Usage: .venv/bin/python benchmarks/accuracy/run.py [--out DIR] [--quick]
+Writes results/accuracy/accuracy.csv (one row per engine, case and setting) and one PNG
+per case (error against cost, one series per engine and knob; a peer that is not
+installed is skipped and said so). Usage:
+.venv/bin/python benchmarks/accuracy/run.py [--out DIR] [--quick] [--no-peers]
 """
 from __future__ import annotations
 
 import argparse
 import csv
+import sys
 import time
 from pathlib import Path
 
@@ -104,20 +108,45 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", type=Path, default=Path("results/accuracy"))
     ap.add_argument("--quick", action="store_true", help="the two cheapest cases and fewer settings")
+    ap.add_argument("--no-peers", action="store_true", help="WMO only")
     args = ap.parse_args()
     cases = ["bounce", "slide"] if args.quick else list(CASES)
     sweeps = {k: v[:3] for k, v in SWEEPS.items()} if args.quick else SWEEPS
     args.out.mkdir(parents=True, exist_ok=True)
     rows = []
+
+    def record(engine, case, knob, value, s, ms, err):
+        rows.append({"engine": engine, "case": case, "knob": knob, "value": value, "dt": s["dt"],
+                     "substeps": s.get("substeps", ""), "iterations": s["iterations"], "ms_per_sim_second": ms,
+                     "error": err, "error_is": CASES[case][1]})
+        print(f"{engine:9s} {case:10s} {knob:10s} {value:10.5g}  {ms:9.2f} ms/sim s  error {err:.3e}", flush=True)
+
     for case in cases:
-        fn, what = CASES[case]
+        fn, _ = CASES[case]
         for knob, values in sweeps.items():
             for value in values:
                 s = dict(DEFAULT, **{knob: value})
                 ms, err = fn(s)
-                rows.append({"case": case, "knob": knob, "value": value, "dt": s["dt"], "substeps": s["substeps"],
-                             "iterations": s["iterations"], "ms_per_sim_second": ms, "error": err, "error_is": what})
-                print(f"{case:10s} {knob:10s} {value:10.5g}  {ms:9.2f} ms/sim s  error {err:.3e}", flush=True)
+                record("wmo", case, knob, value, s, ms, err)
+    engines = ["wmo"]
+    if not args.no_peers:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        import peers
+
+        for engine, run_case in peers.ENGINES.items():
+            try:
+                __import__(engine)
+            except ImportError as e:
+                print(f"{engine}: skipped, not installed ({e})")
+                continue
+            engines.append(engine)
+            for case in cases:
+                for knob, values in peers.PEER_SWEEPS[engine].items():
+                    for value in (values[:3] if args.quick else values):
+                        s = dict(peers.PEER_DEFAULT[engine], **{knob: value})
+                        out = run_case(case, s["dt"], s["iterations"])
+                        if out is not None:
+                            record(engine, case, knob, value, s, *out)
     path = args.out / "accuracy.csv"
     with open(path, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
@@ -128,20 +157,27 @@ def main() -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     for case in cases:
-        fig, ax = plt.subplots(figsize=(6.5, 4.5))
-        for knob in sweeps:
-            pts = [(r["ms_per_sim_second"], r["error"], r["value"]) for r in rows if r["case"] == case and r["knob"] == knob]
-            ax.plot([p[0] for p in pts], [max(p[1], 1e-16) for p in pts], "o-", label=knob)
-            for x, y, v in pts:
-                label = f"1/{round(1 / v)}" if knob == "dt" else f"{v:g}"
-                ax.annotate(label, (x, max(y, 1e-16)), fontsize=7, xytext=(3, 3), textcoords="offset points")
+        fig, ax = plt.subplots(figsize=(7.5, 5))
+        style = {"wmo": ("o", "-"), "pybullet": ("s", "--"), "mujoco": ("^", ":")}
+        for engine in engines:
+            for knob in ("dt", "substeps", "iterations"):
+                pts = [(r["ms_per_sim_second"], r["error"], r["value"]) for r in rows
+                       if r["engine"] == engine and r["case"] == case and r["knob"] == knob]
+                if not pts:
+                    continue
+                marker, line = style[engine]
+                ax.plot([p[0] for p in pts], [max(p[1], 1e-16) for p in pts], marker=marker, linestyle=line,
+                        label=f"{engine} {knob}")
+                for x, y, v in pts:
+                    label = f"1/{round(1 / v)}" if knob == "dt" else f"{v:g}"
+                    ax.annotate(label, (x, max(y, 1e-16)), fontsize=6, xytext=(3, 3), textcoords="offset points")
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlabel("cost: wall ms per simulated second")
         ax.set_ylabel(CASES[case][1])
-        ax.set_title(f"{case}: error against cost (WMO; one knob at a time from the defaults)")
+        ax.set_title(f"{case}: error against cost (one knob at a time from each engine's defaults)", fontsize=9)
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend()
+        ax.legend(fontsize=7)
         fig.tight_layout()
         p = args.out / f"{case}_accuracy.png"
         fig.savefig(p, dpi=120)

@@ -1,0 +1,185 @@
+"""The accuracy cases of run.py in PyBullet and MuJoCo, so the peers' error-against-cost
+points share the axes with WMO's. Same scenes, units and error measures as run.py.
+
+Knobs: dt (both) and solver iterations (PyBullet's sequential-impulse iterations,
+default 10; MuJoCo's Newton iterations, its default solver, default 100 with early
+termination, so only small counts change anything). Not run: the bounce in MuJoCo,
+which has no restitution coefficient (bounce comes from its contact spring, solref),
+so e is not a setting there.
+
+Each function returns (wall ms per simulated second, error), or None where the case
+does not exist for that engine.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from wmo import scenes
+
+G = 10.0
+
+
+# ---- PyBullet --------------------------------------------------------------------------
+
+class _Bullet:
+    def __init__(self, dt: float, iterations: int):
+        import pybullet as pb
+
+        self.pb = pb
+        self.cid = pb.connect(pb.DIRECT)
+        pb.setGravity(0, -G, 0, physicsClientId=self.cid)
+        pb.setPhysicsEngineParameter(fixedTimeStep=dt, numSolverIterations=iterations, numSubSteps=0,
+                                     deterministicOverlappingPairs=1, physicsClientId=self.cid)
+        self.dt = dt
+
+    def box(self, half, pos, mass, friction, restitution=0.0, velocity=None):
+        pb = self.pb
+        shape = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=list(half), physicsClientId=self.cid)
+        b = pb.createMultiBody(mass, shape, -1, list(pos), useMaximalCoordinates=1, physicsClientId=self.cid)
+        pb.changeDynamics(b, -1, lateralFriction=friction, restitution=restitution, linearDamping=0,
+                          angularDamping=0, physicsClientId=self.cid)
+        if mass > 0:
+            pb.changeDynamics(b, -1, activationState=pb.ACTIVATION_STATE_DISABLE_SLEEPING, physicsClientId=self.cid)
+        if velocity is not None:
+            pb.resetBaseVelocity(b, list(velocity), [0, 0, 0], physicsClientId=self.cid)
+        return b
+
+    def sphere(self, r, pos, mass, restitution):
+        pb = self.pb
+        shape = pb.createCollisionShape(pb.GEOM_SPHERE, radius=r, physicsClientId=self.cid)
+        b = pb.createMultiBody(mass, shape, -1, list(pos), useMaximalCoordinates=1, physicsClientId=self.cid)
+        pb.changeDynamics(b, -1, restitution=restitution, linearDamping=0, angularDamping=0,
+                          activationState=pb.ACTIVATION_STATE_DISABLE_SLEEPING, physicsClientId=self.cid)
+        return b
+
+    def ground(self, friction, restitution=0.0):
+        return self.box((50, 1, 50), (0, -1, 0), 0.0, friction, restitution)
+
+    def pos(self, b):
+        return np.array(self.pb.getBasePositionAndOrientation(b, physicsClientId=self.cid)[0])
+
+    def vel(self, b):
+        return np.array(self.pb.getBaseVelocity(b, physicsClientId=self.cid)[0])
+
+    def run(self, seconds, each=None):
+        n = max(1, round(seconds / self.dt))
+        t0 = time.perf_counter()
+        for k in range(n):
+            self.pb.stepSimulation(physicsClientId=self.cid)
+            if each:
+                each(k)
+        return (time.perf_counter() - t0) * 1e3 / seconds
+
+    def close(self):
+        self.pb.disconnect(physicsClientId=self.cid)
+
+
+def pybullet_case(case: str, dt: float, iterations: int):
+    w = _Bullet(dt, iterations)
+    try:
+        if case == "bounce":
+            # Bullet multiplies the two restitutions: ground 1, ball e.
+            e, h, r = 0.5, 1.0, 0.1
+            w.ground(0.5, restitution=1.0)
+            b = w.sphere(r, (0, r + h, 0), 1.0, e)
+            state = {"fell": False, "peak": 0.0}
+
+            def watch(_):
+                y, vy = w.pos(b)[1] - r, w.vel(b)[1]
+                if vy > 0:
+                    state["fell"] = True
+                if state["fell"]:
+                    state["peak"] = max(state["peak"], y)
+
+            ms = w.run(1.2, watch)
+            return ms, abs(state["peak"] - e * e * h) / (e * e * h)
+        if case == "slide":
+            v0, mu = 5.0, 0.25
+            w.ground(0.5)  # Bullet multiplies the frictions: 0.5 x 0.5
+            b = w.box((0.5, 0.5, 0.5), (0, 0.5, 0), 1000.0, 0.5, velocity=(v0, 0, 0))
+            ms = w.run(3.0)
+            return ms, abs(w.pos(b)[0] - v0 * v0 / (2 * mu * G))
+        if case in ("stack10", "pyramid10"):
+            if case == "stack10":
+                pos = [(0.0, 0.5 + k, 0.0) for k in range(10)]
+                masses = [1000.0] * 10
+                friction = math.sqrt(0.6)
+            else:
+                spec = scenes.pyramid_spec(10)
+                pos, masses, friction = [tuple(p) for p in spec.positions], list(spec.masses), spec.friction
+            w.ground(friction)
+            ids = [w.box((0.5, 0.5, 0.5), p, m, friction) for p, m in zip(pos, masses)]
+            p0 = np.array([w.pos(b) for b in ids])
+            ms = w.run(5.0)
+            p1 = np.array([w.pos(b) for b in ids])
+            return ms, float(np.linalg.norm(p1 - p0, axis=1).max())
+    finally:
+        w.close()
+    return None
+
+
+# ---- MuJoCo ----------------------------------------------------------------------------
+
+def _mujoco_run(xml: str, seconds: float, dt: float):
+    import mujoco
+
+    model = mujoco.MjModel.from_xml_string(xml)
+    data = mujoco.MjData(model)
+    n = max(1, round(seconds / dt))
+    t0 = time.perf_counter()
+    for _ in range(n):
+        mujoco.mj_step(model, data)
+    return (time.perf_counter() - t0) * 1e3 / seconds, model, data
+
+
+def _mujoco_boxes(pos, masses, friction, dt, iterations):
+    parts = [f'<mujoco><option timestep="{dt!r}" gravity="0 {-G} 0" iterations="{iterations}"/><worldbody>',
+             f'<geom type="box" size="50 1 50" pos="0 -1 0" friction="{friction} 0 0"/>']
+    for (x, y, z), m in zip(pos, masses):
+        parts.append(f'<body pos="{x!r} {y!r} {z!r}"><freejoint/>'
+                     f'<geom type="box" size="0.5 0.5 0.5" mass="{m!r}" friction="{friction} 0 0"/></body>')
+    parts.append("</worldbody></mujoco>")
+    return "".join(parts)
+
+
+def mujoco_case(case: str, dt: float, iterations: int):
+    import mujoco
+
+    if case == "bounce":
+        return None
+    if case == "slide":
+        # MuJoCo takes the larger of the two geoms' frictions: both 0.25.
+        v0, mu = 5.0, 0.25
+        xml = _mujoco_boxes([(0.0, 0.5, 0.0)], [1000.0], mu, dt, iterations)
+        model = mujoco.MjModel.from_xml_string(xml)
+        data = mujoco.MjData(model)
+        data.qvel[0] = v0
+        n = max(1, round(3.0 / dt))
+        t0 = time.perf_counter()
+        for _ in range(n):
+            mujoco.mj_step(model, data)
+        ms = (time.perf_counter() - t0) * 1e3 / 3.0
+        return ms, abs(float(data.qpos[0]) - v0 * v0 / (2 * mu * G))
+    if case in ("stack10", "pyramid10"):
+        if case == "stack10":
+            pos, masses = [(0.0, 0.5 + k, 0.0) for k in range(10)], [1000.0] * 10
+        else:
+            spec = scenes.pyramid_spec(10)
+            pos, masses = [tuple(map(float, p)) for p in spec.positions], [float(m) for m in spec.masses]
+        xml = _mujoco_boxes(pos, masses, 0.6, dt, iterations)
+        ms, model, data = _mujoco_run(xml, 5.0, dt)
+        p1 = data.qpos.reshape(-1, 7)[:, :3]
+        return ms, float(np.linalg.norm(p1 - np.array(pos), axis=1).max())
+    return None
+
+
+ENGINES = {"pybullet": pybullet_case, "mujoco": mujoco_case}
+#: Each peer's knobs and values (its defaults are dt 1/60 and its own iteration count).
+PEER_SWEEPS = {
+    "pybullet": {"dt": [1 / 30, 1 / 60, 1 / 120, 1 / 240, 1 / 480, 1 / 960], "iterations": [1, 2, 4, 10, 20, 50]},
+    "mujoco": {"dt": [1 / 30, 1 / 60, 1 / 120, 1 / 240, 1 / 480, 1 / 960], "iterations": [1, 2, 4, 10, 20, 50]},
+}
+PEER_DEFAULT = {"pybullet": {"dt": 1 / 60, "iterations": 10}, "mujoco": {"dt": 1 / 60, "iterations": 100}}
