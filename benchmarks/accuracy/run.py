@@ -32,6 +32,8 @@ import wmo
 from wmo import scenes
 
 G = 10.0
+#: Wall seconds after which a sweep's remaining (dearer) settings are skipped.
+BUDGET_S = 60.0
 DEFAULT = {"dt": 1 / 60, "substeps": 4, "iterations": 1}
 SWEEPS = {
     "dt": [1 / 30, 1 / 60, 1 / 120, 1 / 240, 1 / 480, 1 / 960],
@@ -114,20 +116,43 @@ def main() -> None:
     sweeps = {k: v[:3] for k, v in SWEEPS.items()} if args.quick else SWEEPS
     args.out.mkdir(parents=True, exist_ok=True)
     rows = []
+    path = args.out / "accuracy.csv"
+    fields = ["engine", "case", "knob", "value", "dt", "substeps", "iterations", "ms_per_sim_second", "error",
+              "error_is"]
+    csv_file = open(path, "w", newline="")
+    writer = csv.DictWriter(csv_file, fieldnames=fields)
+    writer.writeheader()
 
     def record(engine, case, knob, value, s, ms, err):
+        # Written as it comes, so an interrupted run keeps what it measured.
         rows.append({"engine": engine, "case": case, "knob": knob, "value": value, "dt": s["dt"],
                      "substeps": s.get("substeps", ""), "iterations": s["iterations"], "ms_per_sim_second": ms,
                      "error": err, "error_is": CASES[case][1]})
+        writer.writerow(rows[-1])
+        csv_file.flush()
         print(f"{engine:9s} {case:10s} {knob:10s} {value:10.5g}  {ms:9.2f} ms/sim s  error {err:.3e}", flush=True)
+
+    def sweep(engine, case, knob, values, run):
+        # The settings of a sweep get dearer along it; once one has taken more than
+        # BUDGET_S of wall time the rest are skipped (and said so), which keeps the
+        # whole run bounded (MuJoCo's pyramid costs 9 s per simulated second at dt 1/60).
+        for value in values:
+            t0 = time.perf_counter()
+            out = run(value)
+            if out is not None:
+                record(engine, case, knob, value, *out)
+            if time.perf_counter() - t0 > BUDGET_S:
+                rest = values[values.index(value) + 1:]
+                if rest:
+                    print(f"{engine:9s} {case:10s} {knob:10s} skipped {rest}: the last setting took over "
+                          f"{BUDGET_S:.0f} s", flush=True)
+                return
 
     for case in cases:
         fn, _ = CASES[case]
         for knob, values in sweeps.items():
-            for value in values:
-                s = dict(DEFAULT, **{knob: value})
-                ms, err = fn(s)
-                record("wmo", case, knob, value, s, ms, err)
+            sweep("wmo", case, knob, values,
+                  lambda value: (dict(DEFAULT, **{knob: value}), *fn(dict(DEFAULT, **{knob: value}))))
     engines = ["wmo"]
     if not args.no_peers:
         sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -142,16 +167,12 @@ def main() -> None:
             engines.append(engine)
             for case in cases:
                 for knob, values in peers.PEER_SWEEPS[engine].items():
-                    for value in (values[:3] if args.quick else values):
+                    def run(value, engine=engine, knob=knob, case=case, run_case=run_case):
                         s = dict(peers.PEER_DEFAULT[engine], **{knob: value})
                         out = run_case(case, s["dt"], s["iterations"])
-                        if out is not None:
-                            record(engine, case, knob, value, s, *out)
-    path = args.out / "accuracy.csv"
-    with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+                        return None if out is None else (s, *out)
+                    sweep(engine, case, knob, values[:3] if args.quick else values, run)
+    csv_file.close()
     print(f"wrote {path}")
     import matplotlib
     matplotlib.use("Agg")
