@@ -774,12 +774,14 @@ void World::run_step() {
       BodyState& st = in_contact ? states_[i] : block[block_size];
       st.v = kinds_[i] == BodyKind::kStatic ? Vec3::Zero() : linear_velocities_[i];
       st.w = kinds_[i] == BodyKind::kStatic ? Vec3::Zero() : angular_velocities_[i];
-      st.dp.setZero();
-      st.dq = Quat::Identity();
-      st.inv_mass = dynamic ? masses_[i].inv_mass : 0;
-      st.inv_inertia = dynamic && (f & (kInContact | kHasForce))
-                           ? world_inv_inertia(orientations_[i], masses_[i].inv_inertia_local)
-                           : Mat3::Zero();
+      if (in_contact || (f & kHasForce)) {
+        // Only contact rows read the step's motion (dp, dq) and the masses; forces
+        // read the masses. A free body without forces needs none of it.
+        st.dp.setZero();
+        st.dq = Quat::Identity();
+        st.inv_mass = dynamic ? masses_[i].inv_mass : 0;
+        st.inv_inertia = dynamic ? world_inv_inertia(orientations_[i], masses_[i].inv_inertia_local) : Mat3::Zero();
+      }
       if (in_contact) {
         if (awake_[i]) coupled_.push_back(i);
         continue;
