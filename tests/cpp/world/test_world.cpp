@@ -4,6 +4,7 @@
 #include <cmath>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "wmo/world/world.h"
@@ -24,6 +25,15 @@ World ground_world(WorldSettings s = {}) {
   World w(s);
   w.add_body(box_def(Vec3(50, 1, 50), Vec3(0, -1, 0), BodyKind::kStatic));
   return w;
+}
+
+/// Two unit boxes stacked on the ground of `w`, stepped until both sleep (2 s).
+std::pair<BodyId, BodyId> sleeping_two_box_stack(World& w) {
+  const BodyId a = w.add_body(box_def(Vec3(0.5, 0.5, 0.5), Vec3(0, 0.5, 0)));
+  const BodyId b = w.add_body(box_def(Vec3(0.5, 0.5, 0.5), Vec3(0, 1.5, 0)));
+  w.step(120);
+  EXPECT_EQ(w.awake_dynamic_count(), 0);
+  return {a, b};
 }
 
 }  // namespace
@@ -152,9 +162,7 @@ TEST(World, SleepingBoxCostsNothingAndWakesWhenHit) {
 
 TEST(World, ImpulseSetterAndWrittenVelocityWakeTheIsland) {
   World w = ground_world();
-  const BodyId a = w.add_body(box_def(Vec3(0.5, 0.5, 0.5), Vec3(0, 0.5, 0)));
-  const BodyId b = w.add_body(box_def(Vec3(0.5, 0.5, 0.5), Vec3(0, 1.5, 0)));
-  w.step(120);
+  const auto [a, b] = sleeping_two_box_stack(w);
   ASSERT_EQ(w.awake_dynamic_count(), 0);
   // An impulse on the lower box wakes its whole island (the box on top too).
   w.apply_impulse(a, Vec3(0.5, 0, 0), w.positions()[w.index_of(a)]);
@@ -175,9 +183,7 @@ TEST(World, ImpulseSetterAndWrittenVelocityWakeTheIsland) {
 
 TEST(World, RemovingASleepingSupportWakesWhatRestsOnIt) {
   World w = ground_world();
-  const BodyId a = w.add_body(box_def(Vec3(0.5, 0.5, 0.5), Vec3(0, 0.5, 0)));
-  const BodyId b = w.add_body(box_def(Vec3(0.5, 0.5, 0.5), Vec3(0, 1.5, 0)));
-  w.step(120);
+  const auto [a, b] = sleeping_two_box_stack(w);
   ASSERT_EQ(w.awake_dynamic_count(), 0);
   w.remove_body(a);
   EXPECT_TRUE(w.is_awake(w.index_of(b)));
