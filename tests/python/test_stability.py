@@ -310,3 +310,36 @@ def test_gyroscopic_intermediate_axis_flips_and_is_absent_without_the_term():
             assert min(body_wy) < -4.5 and max(body_wy) > 4.9  # flipped to about -5 rad/s
         else:
             np.testing.assert_allclose(b.angular_velocity, (0.01, 5.0, 0.0), atol=1e-12)
+
+
+def _bounce_apex(e, dt, threshold=1.0):
+    # A ball of radius 0.1 dropped from 1 m (bottom at 1 m) onto a static box, g = 10;
+    # returns the height of the first rebound's apex (sampled at step ends).
+    w = wmo.World(gravity=(0, -10, 0), dt=dt, restitution_threshold=threshold)
+    w.add_body(wmo.Box((50, 1, 50)), position=(0, -1, 0), kind="static", restitution=e)
+    b = w.add_body(wmo.Sphere(0.1), position=(0, 1.1, 0), restitution=e)
+    apex, bounced = 0.0, False
+    for _ in range(int(3 / dt)):
+        w.step()
+        vy, y = b.linear_velocity[1], b.position[1] - 0.1
+        bounced = bounced or vy > 0
+        if bounced:
+            apex = max(apex, y)
+            if vy < 0:
+                break
+    return apex
+
+
+def test_ball_bounces_to_e_squared_height_at_the_default_step():
+    # e = 0.8 at dt 1/60: within the issue's 2% of e^2 h (measured -1.2%). Restitution
+    # reverses the approach speed of the substep where the contact first pushes, not
+    # the step's start (which was a step of gravity slower: 8.7% low with e = 0.5).
+    assert _bounce_apex(0.8, 1 / 60) == pytest.approx(0.64, rel=0.02)
+
+
+@pytest.mark.xfail(strict=True, reason="issue 3/4, open: at 4.5 m/s the ball moves 7.5 cm in the impact "
+                   "step, more than the 4 cm speculative margin, so it sinks 2.2 cm before the contact "
+                   "exists and rebounds from below the surface (measured 6.9% low with e = 0.5 at dt "
+                   "1/60); margins that grow with the approach speed (issue 4) would close it")
+def test_ball_bounces_to_e_squared_height_with_a_low_restitution():
+    assert _bounce_apex(0.5, 1 / 60, threshold=0.1) == pytest.approx(0.25, rel=0.02)

@@ -99,6 +99,10 @@ void solve_contacts(std::vector<ContactConstraint>& cs, std::vector<BodyState>& 
       const Real next = std::max(p.normal_impulse + impulse, Real(0));
       impulse = next - p.normal_impulse;
       p.normal_impulse = next;
+      // The approach speed that restitution reverses: the one at the substep where the
+      // point first pushes (the impact), not at the step's start, which misses up to
+      // a step of gravity (measured: 8.7% low on e^2 h at dt 1/60, 1.9% per substep).
+      if (impulse > 0 && p.max_normal_impulse == 0) p.relative_velocity = vn;
       p.max_normal_impulse = std::max(p.max_normal_impulse, impulse);
       apply(a, b, p.ra, p.rb, impulse * n);
     }

@@ -54,7 +54,9 @@ struct ContactConstraintPoint {
   Real normal_impulse = 0;            ///< accumulated, N s (warm-started)
   std::array<Real, 2> tangent_impulse{};
   Real max_normal_impulse = 0;        ///< largest normal impulse this step (restitution)
-  Real relative_velocity = 0;         ///< normal relative velocity at the step's start, m/s
+  /// Normal relative velocity (m/s) at the step's start, replaced by the one at the
+  /// substep where the point first pushes: the approach speed restitution reverses.
+  Real relative_velocity = 0;
   std::uint32_t feature_id = 0;
 };
 
