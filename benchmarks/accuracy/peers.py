@@ -123,11 +123,14 @@ def pybullet_case(case: str, dt: float, iterations: int):
 
 # ---- MuJoCo ----------------------------------------------------------------------------
 
-def _mujoco_run(xml: str, seconds: float, dt: float):
+def _mujoco_run(xml: str, seconds: float, dt: float, init=None):
+    """Steps the model for `seconds`; init(data), if given, sets the start state."""
     import mujoco
 
     model = mujoco.MjModel.from_xml_string(xml)
     data = mujoco.MjData(model)
+    if init:
+        init(data)
     n = max(1, round(seconds / dt))
     t0 = time.perf_counter()
     for _ in range(n):
@@ -146,22 +149,13 @@ def _mujoco_boxes(pos, masses, friction, dt, iterations):
 
 
 def mujoco_case(case: str, dt: float, iterations: int):
-    import mujoco
-
     if case == "bounce":
         return None
     if case == "slide":
         # MuJoCo takes the larger of the two geoms' frictions: both 0.25.
         v0, mu = 5.0, 0.25
         xml = _mujoco_boxes([(0.0, 0.5, 0.0)], [1000.0], mu, dt, iterations)
-        model = mujoco.MjModel.from_xml_string(xml)
-        data = mujoco.MjData(model)
-        data.qvel[0] = v0
-        n = max(1, round(3.0 / dt))
-        t0 = time.perf_counter()
-        for _ in range(n):
-            mujoco.mj_step(model, data)
-        ms = (time.perf_counter() - t0) * 1e3 / 3.0
+        ms, _, data = _mujoco_run(xml, 3.0, dt, init=lambda d: d.qvel.__setitem__(0, v0))
         return ms, abs(float(data.qpos[0]) - v0 * v0 / (2 * mu * G))
     if case in ("stack10", "pyramid10"):
         if case == "stack10":

@@ -68,7 +68,7 @@ struct WorldSettings {
   CombineRule friction_combine = CombineRule::kMultiply;
   CombineRule restitution_combine = CombineRule::kMax;
   /// Gyroscopic term w x (I w) for dynamic bodies: each substep's rotation keeps the
-  /// world angular momentum (implicit midpoint on the rotation, see integrate_positions),
+  /// world angular momentum (implicit midpoint on the rotation, see integrate_position),
   /// so a free spinning body conserves it to rounding and shows the intermediate-axis
   /// flip. Off by default, as in Box2D and Bullet (without it, w is constant in free
   /// flight, which is what a sphere does and what games usually want).
