@@ -106,6 +106,7 @@ void validate_world_settings(const WorldSettings& s) {
   require_non_negative("contact_push_max", s.solver.push_max);
   require_non_negative("restitution_threshold", s.solver.restitution_threshold);
   require_non_negative("speculative_distance", s.speculative_distance);
+  require_non_negative("speculative_motion", s.speculative_motion);
   require_non_negative("aabb_margin", s.aabb_margin);
   require_non_negative("sleep_linear_threshold", s.sleep_linear_threshold);
   require_non_negative("sleep_angular_threshold", s.sleep_angular_threshold);
@@ -613,6 +614,14 @@ void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseO
   }
 }
 
+// How far the bodies' relative translation carries their surfaces within one step
+// (WorldSettings::speculative_motion). Static and sleeping bodies have zero velocity.
+Real World::pair_motion_margin(int a, int b) const {
+  const Real scale = settings_.speculative_motion;
+  if (scale == 0) return 0;
+  return scale * settings_.dt * (linear_velocities_[b] - linear_velocities_[a]).norm();
+}
+
 Vec3 World::sliding_direction(const Manifold& m, int a, int b, const Vec3& com_a, const Vec3& com_b) const {
   // The friction rows use one effective mass per tangent, so their combined impulse
   // points along (m1 t1.v, m2 t2.v) rather than along the slip v; where m1 != m2
@@ -639,9 +648,15 @@ void World::run_step() {
   {
     long long moved = 0;
     StageTimer t(profile_[kUpdateBroadphase]);
+    const Real motion = settings_.speculative_motion * dt;
     for (int i = 0; i < n; ++i) {
       if (!awake_[i]) continue;  // static or sleeping: the proxy stays where it is
-      const Aabb box = shapes_[i]->world_aabb(Pose(positions_[i], orientations_[i])).fattened(spec);
+      // The box swept by the step's predicted translation (speculative_motion), so
+      // that the pairs of surfaces that can meet within the step are reported.
+      const Vec3 d = motion * linear_velocities_[i];
+      Aabb box = shapes_[i]->world_aabb(Pose(positions_[i], orientations_[i])).fattened(spec);
+      box.min += d.cwiseMin(Vec3::Zero());
+      box.max += d.cwiseMax(Vec3::Zero());
       broadphase_->move_proxy(proxies_[i], box, dt * linear_velocities_[i]);
       ++moved;
     }
@@ -703,7 +718,7 @@ void World::run_step() {
         // At least one awake dynamic body: pairs of sleeping, static and kinematic
         // bodies need no contact.
         if (!awake_dynamic(a) && !awake_dynamic(b)) continue;
-        collide_pair(sa, sb, a, b, spec, out);
+        collide_pair(sa, sb, a, b, spec + pair_motion_margin(a, b), out);
       }
     };
     if (parts > 1 && pairs_.size() >= kMinParallelPairs) {
@@ -780,6 +795,7 @@ void World::run_step() {
         st.dp.setZero();
         st.dq = Quat::Identity();
         st.inv_mass = dynamic ? masses_[i].inv_mass : 0;
+        st.gravity = dynamic ? Vec3(gravity_scale_[i] * settings_.gravity) : Vec3::Zero();
         st.inv_inertia = dynamic ? world_inv_inertia(orientations_[i], masses_[i].inv_inertia_local) : Mat3::Zero();
       }
       if (in_contact) {

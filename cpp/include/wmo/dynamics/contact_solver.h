@@ -30,6 +30,9 @@ struct BodyState {
   Vec3 dp = Vec3::Zero();  ///< COM displacement since the step began, m, world
   Quat dq = Quat::Identity();  ///< rotation since the step began (world frame)
   Real inv_mass = 0;           ///< 1/kg; 0 for static and kinematic bodies
+  /// Gravity acting on the body (m/s^2, world; zero for static and kinematic bodies):
+  /// restitution extrapolates an approach speed with it (apply_restitution).
+  Vec3 gravity = Vec3::Zero();
   Mat3 inv_inertia = Mat3::Zero();  ///< world-space inverse inertia at the step's start
 };
 
@@ -57,6 +60,10 @@ struct ContactConstraintPoint {
   /// Normal relative velocity (m/s) at the step's start, replaced by the one at the
   /// substep where the point first pushes: the approach speed restitution reverses.
   Real relative_velocity = 0;
+  /// Separation (m, >= 0 for a speculative contact) when the point first pushed: a
+  /// speculative contact stops the bodies before their surfaces meet, so the approach
+  /// speed at the meeting is relative_velocity extrapolated over this gap.
+  Real push_gap = 0;
   std::uint32_t feature_id = 0;
 };
 
@@ -92,7 +99,13 @@ void warm_start_contacts(std::vector<ContactConstraint>& cs, std::vector<BodySta
 /// One Gauss-Seidel pass over every contact; `use_bias` adds the soft position bias.
 void solve_contacts(std::vector<ContactConstraint>& cs, std::vector<BodyState>& states,
                     const Softness& soft, Real inv_h, Real push_max, bool use_bias);
-/// Restitution pass after the substeps (Box2D v3 b2ApplyRestitution).
+/// Restitution pass after the substeps (Box2D v3 b2ApplyRestitution): each point that
+/// approached faster than `threshold` and pushed gets the normal velocity
+/// -restitution * v_impact, where v_impact is the approach speed at the substep it first
+/// pushed, extrapolated over the gap left then (push_gap) under the bodies' relative
+/// gravity: v_impact^2 = v^2 + 2 g_n gap. (A speculative contact stops the bodies up to
+/// a substep before their surfaces would meet, at a speed lower by up to a substep of
+/// gravity: measured 3.6% low on e^2 h for e = 0.8 at dt 1/60 without it.)
 void apply_restitution(std::vector<ContactConstraint>& cs, std::vector<BodyState>& states,
                        Real threshold);
 

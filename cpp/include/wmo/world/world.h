@@ -58,10 +58,23 @@ struct WorldSettings {
   /// Relax passes (without bias) per substep.
   int relax_iterations = 1;
   SolverSettings solver{};
-  /// Speculative margin (unit: m): contacts are created for pairs closer than this, so
-  /// bodies approaching by up to margin / dt m/s are stopped without tunnelling-free
-  /// guarantees beyond it (CCD is a later feature).
+  /// Speculative margin at rest (unit: m): contacts are created for pairs closer than
+  /// this plus the motion margin below.
   Real speculative_distance = 0.04;
+  /// Motion margin (dimensionless, >= 0): a pair's speculative margin grows by this
+  /// times the distance its bodies' relative translation covers in one step,
+  /// dt |v_b - v_a|, and each body's broadphase box is swept along dt v. A contact then
+  /// exists before the step in which the surfaces would meet, however fast they
+  /// approach, and the soft step stops them at the surface instead of inside or behind
+  /// it (speculative contacts, as in Box2D v3, Jolt and Rapier). Rotation is not
+  /// covered: a linearised rotation overestimates how fast a point approaches (a spinning
+  /// rod then stops at a wall it would have swept past), so rotational tunnelling is
+  /// left to time of impact (issue 4). Like every speculative scheme it can stop a body
+  /// that would have slid past a corner within the margin. Bodies at rest pay nothing,
+  /// fast ones pay for their extra contacts: boxes3000 with 1.0 has 41% more contact
+  /// points and a 30-50% dearer step for a deepest penetration of 0.59 m instead of
+  /// 0.955 m (2 m boxes). Off (0) by default.
+  Real speculative_motion = 0.0;
   /// Broadphase fattening (unit: m): a body moves its proxy only when its box leaves
   /// the box fattened by this much.
   Real aabb_margin = 0.1;
@@ -244,6 +257,7 @@ class World {
   void order_pairs_top_down();
   /// Unit tangential direction of the slip at manifold m (zero if below 1e-4 m/s).
   Vec3 sliding_direction(const Manifold& m, int a, int b, const Vec3& com_a, const Vec3& com_b) const;
+  Real pair_motion_margin(int a, int b) const;
   Vec3 world_com(int i) const { return positions_[i] + orientations_[i] * masses_[i].local_com; }
   /// One substep of h seconds for the bodies in coupled_ (velocities: dynamic ones).
   void integrate_velocities(Real h);
