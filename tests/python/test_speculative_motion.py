@@ -72,7 +72,7 @@ def test_bodies_at_rest_get_the_same_contacts():
     # Motion margins scale with velocity: a resting stack makes the same contacts.
     counts = []
     for motion in (0.0, 1.0):
-        w = wmo.scenes.tower(5, speculative_motion=motion)
+        w = wmo.scenes.tower(5, speculative_motion=motion, sleeping=False)
         w.step(30)
         counts.append(len(w.contacts["depth"]))
     assert counts[0] == counts[1] > 0

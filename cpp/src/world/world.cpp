@@ -740,7 +740,10 @@ void World::run_step() {
     StageTimer t(profile_[kSolve], points);
     const int substeps = settings_.substeps;
     const Real h = dt / substeps, inv_h = 1 / h;
-    states_.resize(n);
+    // One state per body, plus one past them that stays at rest with zero mass: the
+    // solver's padding lanes point at it (WideContacts).
+    states_.resize(n + 1);
+    states_[n] = BodyState{};
     body_flags_.assign(n, 0);
     for (const ContactConstraint& c : constraints_) {
       body_flags_[c.body_a] |= kInContact;
@@ -808,19 +811,26 @@ void World::run_step() {
     flush_block();
     Softness soft;
     const bool contacts = !constraints_.empty();
-    if (contacts) prepare_contacts(constraints_, states_, settings_.solver, h, soft);
+    if (contacts) {
+      prepare_contacts(constraints_, states_, settings_.solver, h, soft);
+      // The passes run on lane groups, in an order equivalent to the constraints'
+      // sequence (pairs top down) that keeps the groups full.
+      dependency_level_order(constraints_, states_, solve_order_, level_scratch_);
+      wide_.build(constraints_, solve_order_, states_, n);
+    }
     for (int sub = 0; sub < substeps; ++sub) {
       integrate_velocities(h);
       if (contacts) {
-        warm_start_contacts(constraints_, states_);
+        wide_.warm_start(states_);
         for (int it = 0; it < settings_.iterations; ++it)
-          solve_contacts(constraints_, states_, soft, inv_h, settings_.solver.push_max, true);
+          wide_.solve(states_, soft, inv_h, settings_.solver.push_max, true);
       }
       integrate_positions(h);
       if (contacts)
         for (int it = 0; it < settings_.relax_iterations; ++it)
-          solve_contacts(constraints_, states_, soft, inv_h, settings_.solver.push_max, false);
+          wide_.solve(states_, soft, inv_h, settings_.solver.push_max, false);
     }
+    if (contacts) wide_.unpack(constraints_);
   }
 
   // ---- restitution ----
@@ -865,7 +875,7 @@ void World::run_step() {
 
 std::vector<ContactInfo> World::contacts() const {
   std::vector<ContactInfo> out;
-  if (static_cast<int>(states_.size()) != body_count()) return out;
+  if (static_cast<int>(states_.size()) != body_count() + 1) return out;  // stale (bodies changed)
   for (const ContactConstraint& c : constraints_) {
     const BodyState& a = states_[c.body_a];
     const BodyState& b = states_[c.body_b];

@@ -109,4 +109,67 @@ void solve_contacts(std::vector<ContactConstraint>& cs, std::vector<BodyState>& 
 void apply_restitution(std::vector<ContactConstraint>& cs, std::vector<BodyState>& states,
                        Real threshold);
 
+/// Writes to `order` the indices of `cs` level by level: a constraint's level is one
+/// more than the last level used by either of its dynamic bodies (inv_mass > 0 in
+/// `states`), stable within a level. Within a level no two constraints share a dynamic
+/// body, and for every body the constraints acting on it keep their order, so Gauss-
+/// Seidel passes in this order compute exactly what passes in the given order compute
+/// (constraints with no dynamic body in common commute; static and kinematic bodies
+/// receive exact zeros), while neighbours in it are independent: the order that fills
+/// WideContacts' groups. `scratch` is reused storage. O(constraints + bodies).
+void dependency_level_order(const std::vector<ContactConstraint>& cs, const std::vector<BodyState>& states,
+                            std::vector<int>& order, std::vector<int>& scratch);
+
+/// The contacts regrouped for the solver's passes: groups of kWideLanes constraints with
+/// no dynamic body in common, stored lane by lane (structure of arrays), so each pass
+/// runs one group's rows for all its lanes at once in 4-wide arithmetic (AVX2 where
+/// the processor has it, chosen at run time; two 2-wide halves otherwise). The groups
+/// are formed from consecutive constraints in the given order, a new group starting
+/// whenever the next constraint shares a dynamic body with the current group: the
+/// constraints in a group commute, so the passes compute what the plain Gauss-Seidel
+/// passes (solve_contacts) over that order compute, up to rounding (World passes its
+/// constraints by dependency level, an order equivalent to its sequence that keeps the
+/// groups full). Missing lanes and points are padding with zero mass.
+class WideContacts {
+ public:
+  static constexpr int kLanes = 4;
+  /// Packs `cs` (prepare_contacts already run) for `states`, visiting the constraints in
+  /// `order` (indices into cs, each once; the groups follow it); `dummy` is the index of
+  /// a state with zero velocities and zero inverse mass and inertia that padding lanes
+  /// point at (the solver writes only zeros to it).
+  void build(const std::vector<ContactConstraint>& cs, const std::vector<int>& order,
+             const std::vector<BodyState>& states, int dummy);
+  /// The passes of contact_solver.h on the packed contacts.
+  void warm_start(std::vector<BodyState>& states) const;
+  void solve(std::vector<BodyState>& states, const Softness& soft, Real inv_h, Real push_max, bool use_bias);
+  /// Writes impulses, max_normal_impulse, relative_velocity and push_gap back to `cs`
+  /// (the constraints given to build).
+  void unpack(std::vector<ContactConstraint>& cs) const;
+  int group_count() const { return static_cast<int>(groups_.size()); }
+
+  /// One group: lane l holds constraint source_[4 g + l]. Every quantity is an array
+  /// over the lanes; vectors are stored per component ([3][kLanes]).
+  struct Group {
+    std::array<int, kLanes> body_a{}, body_b{};
+    int points = 0;           ///< largest point count among the lanes
+    bool friction = false;    ///< some lane has friction
+    alignas(32) Real n[3][kLanes] = {}, t1[3][kLanes] = {}, t2[3][kLanes] = {};
+    alignas(32) Real mu[kLanes] = {};
+    struct Point {
+      alignas(32) Real ra[3][kLanes] = {}, rb[3][kLanes] = {};
+      alignas(32) Real adjusted_separation[kLanes] = {}, normal_mass[kLanes] = {};
+      alignas(32) Real tangent_mass[2][kLanes] = {};
+      alignas(32) Real normal_impulse[kLanes] = {}, tangent_impulse[2][kLanes] = {};
+      alignas(32) Real max_normal_impulse[kLanes] = {}, relative_velocity[kLanes] = {};
+      alignas(32) Real push_gap[kLanes] = {};
+    };
+    std::array<Point, 4> p{};
+  };
+  const std::vector<Group>& groups() const { return groups_; }
+
+ private:
+  std::vector<Group> groups_;
+  std::vector<int> source_;  ///< per group and lane: index into cs, or -1 for padding
+};
+
 }  // namespace wmo

@@ -329,6 +329,9 @@ class World {
   std::vector<BodyState> states_;
   std::vector<ContactConstraint> constraints_;
   std::vector<std::uint64_t> constraint_keys_;
+  /// The order the solver visits constraints_ in (dependency_level_order) and its scratch.
+  std::vector<int> solve_order_, level_scratch_;
+  WideContacts wide_;  ///< the solver's lane-grouped copy of constraints_ (contact_solver.h)
   // Scratch of order_pairs_top_down (kept to avoid allocating every step).
   std::vector<std::uint64_t> order_scratch_;
   std::vector<ProxyPair> pair_scratch_;
