@@ -149,6 +149,11 @@ speculative_motion : the margin also grows by this times the distance the pair's
     fast bodies meeting head-on collide), at the cost of more contacts for fast bodies
     and, as with any speculative contact, an occasional stop at a corner the body would
     have passed within the margin. Rotation is not covered.
+manifold_reuse_distance, manifold_reuse_angle : a touching pair whose relative pose
+    moved less than this (m, default 1e-3) and this (rad, default 2 degrees) since its
+    manifold was computed keeps that manifold, carried along with the bodies, depths
+    measured anew (Jolt's body pair cache): a resting pile costs almost no narrowphase.
+    0 recomputes every pair every step.
 friction_combine, restitution_combine : 'multiply' (default for friction, Bullet's rule),
     'geometric_mean', 'max' (default for restitution), 'min' or 'average'.
 gyroscopic : integrate the gyroscopic term (default False): rotations keep the world
@@ -169,6 +174,7 @@ are zero-copy, writable views; see the module notes on their lifetime.
       .def(py::init([](py::object gravity, double dt, int substeps, int iterations, int relax_iterations,
                        double contact_hertz, double contact_damping_ratio, double contact_push_max,
                        double restitution_threshold, double speculative_distance, double speculative_motion,
+                       double manifold_reuse_distance, double manifold_reuse_angle,
                        const std::string& friction_combine,
                        const std::string& restitution_combine, bool gyroscopic, bool sleeping,
                        double sleep_linear_threshold, double sleep_angular_threshold, double time_to_sleep,
@@ -185,6 +191,8 @@ are zero-copy, writable views; see the module notes on their lifetime.
              s.solver.restitution_threshold = restitution_threshold;
              s.speculative_distance = speculative_distance;
              s.speculative_motion = speculative_motion;
+             s.manifold_reuse_distance = manifold_reuse_distance;
+             s.manifold_reuse_angle = manifold_reuse_angle;
              s.friction_combine = combine_rule_from_string(friction_combine);
              s.restitution_combine = combine_rule_from_string(restitution_combine);
              s.gyroscopic = gyroscopic;
@@ -199,7 +207,8 @@ are zero-copy, writable views; see the module notes on their lifetime.
            py::arg("iterations") = 1, py::arg("relax_iterations") = 1, py::arg("contact_hertz") = 30.0,
            py::arg("contact_damping_ratio") = 10.0, py::arg("contact_push_max") = 3.0,
            py::arg("restitution_threshold") = 1.0, py::arg("speculative_distance") = 0.04,
-           py::arg("speculative_motion") = 0.0,
+           py::arg("speculative_motion") = 0.0, py::arg("manifold_reuse_distance") = 1e-3,
+           py::arg("manifold_reuse_angle") = 2 * kPi / 180,
            py::arg("friction_combine") = "multiply", py::arg("restitution_combine") = "max",
            py::arg("gyroscopic") = false, py::arg("sleeping") = true, py::arg("sleep_linear_threshold") = 0.05,
            py::arg("sleep_angular_threshold") = 2 * kPi / 180, py::arg("time_to_sleep") = 0.5,
@@ -273,6 +282,9 @@ field; the world is unchanged. Existing state views may detach (see World).
       .def_property_readonly("substeps", [](const World& w) { return w.settings().substeps; })
       .def_property_readonly("iterations", [](const World& w) { return w.settings().iterations; })
       .def_property_readonly("step_count", &World::step_count)
+      .def_property_readonly("reused_manifolds", &World::reused_manifold_count,
+                             "Manifolds of the last step reused from the cache instead of recomputed "
+                             "(see manifold_reuse_distance).")
       .def_property_readonly("sleeping", [](const World& w) { return w.settings().enable_sleep; },
                              "Whether resting islands are put to sleep.")
       .def_property_readonly("awake_count", &World::awake_dynamic_count, "Number of awake dynamic bodies.")

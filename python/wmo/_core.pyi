@@ -229,6 +229,7 @@ class World:
                  contact_hertz: float = 30.0, contact_damping_ratio: float = 10.0,
                  contact_push_max: float = 3.0, restitution_threshold: float = 1.0,
                  speculative_distance: float = 0.04, speculative_motion: float = 0.0,
+                 manifold_reuse_distance: float = 1e-3, manifold_reuse_angle: float = 0.0349,
                  friction_combine: str = "multiply",
                  restitution_combine: str = "max", gyroscopic: bool = False,
                  sleeping: bool = True, sleep_linear_threshold: float = 0.05,
@@ -269,6 +270,8 @@ class World:
     def iterations(self) -> int: ...
     @property
     def step_count(self) -> int: ...
+    @property
+    def reused_manifolds(self) -> int: ...
     @property
     def sleeping(self) -> bool: ...
     @property

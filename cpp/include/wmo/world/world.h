@@ -78,6 +78,17 @@ struct WorldSettings {
   /// Broadphase fattening (unit: m): a body moves its proxy only when its box leaves
   /// the box fattened by this much.
   Real aabb_margin = 0.1;
+  /// Manifold reuse (Jolt's body pair cache): a touching pair whose relative pose has
+  /// moved less than this distance (unit: m) and this angle (unit: rad) since its
+  /// manifold was computed keeps that manifold, its points carried along rigidly with
+  /// the two bodies and its depths measured anew along the normal, instead of running
+  /// the narrowphase again (Jolt's defaults). The depths stay exact for a contact whose
+  /// features do not change (resting faces); the points' positions along the surface
+  /// lag by up to distance + angle x body size (1.7 cm for a 1 m box at 2 degrees). A
+  /// resting pile then costs little narrowphase (the pyramid: 99% of its manifolds
+  /// reused, step about 25% cheaper). 0 for either recomputes every pair every step.
+  Real manifold_reuse_distance = 1e-3;
+  Real manifold_reuse_angle = 2 * kPi / 180;
   CombineRule friction_combine = CombineRule::kMultiply;
   CombineRule restitution_combine = CombineRule::kMax;
   /// Gyroscopic term w x (I w) for dynamic bodies: each substep's rotation keeps the
@@ -208,6 +219,8 @@ class World {
   /// Contact points of the last step (after the solve).
   std::vector<ContactInfo> contacts() const;
   int contact_point_count() const;
+  /// Manifolds of the last step reused from the cache (WorldSettings::manifold_reuse_distance).
+  long long reused_manifold_count() const { return reused_manifolds_; }
   /// Largest penetration depth among the last step's contact points (m), 0 if none.
   Real max_penetration() const;
 
@@ -236,9 +249,24 @@ class World {
     /// wrong directions; the vector is projected onto the new basis instead.
     Vec3 tangent_impulse;
   };
+  /// A pair's manifold as the narrowphase computed it, in the bodies' local frames,
+  /// with B's pose relative to A at that time: reused while the relative pose stays
+  /// within WorldSettings::manifold_reuse_distance / manifold_reuse_angle of it.
+  struct ManifoldGeometry {
+    bool valid = false;
+    Vec3 rel_position = Vec3::Zero();  ///< B's origin in A's frame, m
+    Quat rel_rotation = Quat::Identity();  ///< B's rotation relative to A
+    Vec3 normal = Vec3::UnitY();       ///< A's frame
+    int count = 0;
+    std::array<Vec3, 4> point_a{};     ///< A's frame
+    std::array<Vec3, 4> point_b{};     ///< B's frame
+    std::array<std::uint32_t, 4> feature_id{};
+  };
   struct CachedManifold {
+    std::uint64_t stamp = 0;  ///< the step (step_count + 1) that last wrote it
     int count = 0;
     std::array<CachedPoint, 4> points{};
+    ManifoldGeometry geometry;
   };
 
   int require(BodyId id, const char* what) const;
@@ -247,9 +275,17 @@ class World {
     std::vector<Manifold> manifolds;  // scratch of collide()
     std::vector<ContactConstraint> constraints;
     std::vector<std::uint64_t> keys;
+    std::vector<ManifoldGeometry> geometry;  // per constraint
+    long long reused = 0;  // manifolds taken from the cache
   };
   /// Contact constraints of one pair (slots sa < sb, rows a, b) appended to out.
   void collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseOut& out) const;
+  /// Cache key of a manifold: slots (24 bits each) and the composite children (8 bits
+  /// each, wrapped).
+  static std::uint64_t manifold_key(int sa, int sb, int child_a, int child_b) {
+    return (static_cast<std::uint64_t>(sa) << 40) | (static_cast<std::uint64_t>(sb) << 16) |
+           ((static_cast<std::uint64_t>(child_a) & 0xFF) << 8) | (static_cast<std::uint64_t>(child_b) & 0xFF);
+  }
   /// Below this many pairs the narrowphase runs on the calling thread alone (waking
   /// the workers costs ~10 us).
   static constexpr std::size_t kMinParallelPairs = 64;
@@ -329,6 +365,7 @@ class World {
   std::vector<BodyState> states_;
   std::vector<ContactConstraint> constraints_;
   std::vector<std::uint64_t> constraint_keys_;
+  std::vector<ManifoldGeometry> constraint_geometry_;  ///< per constraint, for the cache
   /// The order the solver visits constraints_ in (dependency_level_order) and its scratch.
   std::vector<int> solve_order_, level_scratch_;
   WideContacts wide_;  ///< the solver's lane-grouped copy of constraints_ (contact_solver.h)
@@ -336,6 +373,7 @@ class World {
   std::vector<std::uint64_t> order_scratch_;
   std::vector<ProxyPair> pair_scratch_;
   std::unordered_map<std::uint64_t, CachedManifold> cache_;
+  long long reused_manifolds_ = 0;
 
   std::array<StageProfile, kStageNames.size()> profile_{};
   long long step_count_ = 0;
