@@ -587,9 +587,8 @@ void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseO
   // for reuse and for warm starting.
   const auto single = cacheable ? cache_.find(manifold_key(sa, sb, -1, -1)) : cache_.end();
   if (cacheable && settings_.manifold_reuse_distance > 0 && settings_.manifold_reuse_angle > 0) {
-    const auto it = single;
-    if (it != cache_.end() && it->second.geometry.valid) {
-      const ManifoldGeometry& g = it->second.geometry;
+    if (single != cache_.end() && single->second.geometry.valid) {
+      const ManifoldGeometry& g = single->second.geometry;
       const Real d2 = (rel_p - g.rel_position).squaredNorm();
       // |q1 . q2| = cos(half the angle between the rotations).
       const Real cos_half = std::abs(rel_q.dot(g.rel_rotation));
@@ -615,10 +614,9 @@ void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseO
   }
   if (out.manifolds.empty()) return;
   // What the cache keeps of this pair's manifold (store_impulses).
-  ManifoldGeometry geometry;  // invalid: nothing to cache; a reused one is already there
+  ManifoldGeometry geometry;  // invalid by default: nothing to reuse next step
   if (reuse) {
-    geometry.valid = false;
-    geometry.count = -1;  // marks "keep the cached geometry" (store_impulses)
+    geometry.keep_cached = true;
   } else if (cacheable && out.manifolds.size() == 1) {
     const Manifold& m = out.manifolds[0];
     geometry.valid = true;
@@ -928,9 +926,7 @@ void World::run_step() {
       CachedManifold& cm = cache_[constraint_keys_[k]];
       cm.stamp = stamp;
       cm.count = c.count;
-      // A reused manifold keeps the geometry it was computed with (count -1 marks it),
-      // so the reuse tolerances bound the drift from that computation.
-      if (constraint_geometry_[k].count >= 0) cm.geometry = constraint_geometry_[k];
+      if (!constraint_geometry_[k].keep_cached) cm.geometry = constraint_geometry_[k];
       for (int j = 0; j < c.count; ++j)
         cm.points[j] = CachedPoint{c.points[j].feature_id, c.points[j].normal_impulse,
                                    c.points[j].tangent_impulse[0] * c.tangent1 +

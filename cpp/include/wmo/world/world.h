@@ -254,6 +254,10 @@ class World {
   /// within WorldSettings::manifold_reuse_distance / manifold_reuse_angle of it.
   struct ManifoldGeometry {
     bool valid = false;
+    /// Set on a manifold that was reused: the cache keeps the geometry it was computed
+    /// with, so the tolerances bound the drift from that computation, not from the last
+    /// step's reuse.
+    bool keep_cached = false;
     Vec3 rel_position = Vec3::Zero();  ///< B's origin in A's frame, m
     Quat rel_rotation = Quat::Identity();  ///< B's rotation relative to A
     Vec3 normal = Vec3::UnitY();       ///< A's frame
