@@ -1,6 +1,8 @@
 """What accuracy costs in time (issue 3, section 6): each accuracy knob of the world (time
-step, substeps, velocity iterations) swept one at a time from the defaults (dt 1/60 s, 4
-substeps, 1 iteration) on cases with a known answer, measuring the error against the
+step, substeps, velocity iterations, contact margins growing with the approach
+(speculative_motion), manifold reuse tolerance) swept one at a time from the defaults
+(dt 1/60 s, 4 substeps, 1 iteration, motion margins off, reuse 1 mm) on cases with a
+known answer, measuring the error against the
 cost in milliseconds of wall time per simulated second; the same cases in PyBullet and
 MuJoCo (their dt and solver iterations swept, peers.py) on the same axes.
 
@@ -34,17 +36,27 @@ from wmo import scenes
 G = 10.0
 #: Wall seconds after which a sweep's remaining (dearer) settings are skipped.
 BUDGET_S = 60.0
-DEFAULT = {"dt": 1 / 60, "substeps": 4, "iterations": 1}
+DEFAULT = {"dt": 1 / 60, "substeps": 4, "iterations": 1, "speculative_motion": 0.0,
+           "manifold_reuse_distance": 1e-3}
 SWEEPS = {
     "dt": [1 / 30, 1 / 60, 1 / 120, 1 / 240, 1 / 480, 1 / 960],
     "substeps": [1, 2, 4, 8, 16],
     "iterations": [1, 2, 4, 10, 20, 50],
+    # Contact margins that grow with the approach (off by default) and manifold reuse
+    # (1 mm by default; 0 recomputes every pair every step).
+    "speculative_motion": [0.0, 1.0],
+    "manifold_reuse_distance": [0.0, 1e-3, 1e-2],
 }
+KNOBS = list(SWEEPS)
+
+
+def world_settings(s):
+    """The World keyword arguments of a setting (everything swept above)."""
+    return {k: s[k] for k in KNOBS}
 
 
 def world(settings, **kw):
-    return wmo.World(gravity=(0, -G, 0), dt=settings["dt"], substeps=settings["substeps"],
-                     iterations=settings["iterations"], sleeping=False, **kw)
+    return wmo.World(gravity=(0, -G, 0), sleeping=False, **world_settings(settings), **kw)
 
 
 def ground(w, friction=0.5):
@@ -89,14 +101,14 @@ def case_slide(s):
 
 
 def case_stack(s, n=10):
-    w = scenes.tower(n, sleeping=False, dt=s["dt"], substeps=s["substeps"], iterations=s["iterations"])
+    w = scenes.tower(n, sleeping=False, **world_settings(s))
     p0 = np.array(w.positions)
     ms, _ = run_for(w, 5.0, s["dt"])
     return ms, float(np.linalg.norm(w.positions - p0, axis=1).max())
 
 
 def case_pyramid(s, layers=10):
-    w = scenes.pyramid(layers, sleeping=False, dt=s["dt"], substeps=s["substeps"], iterations=s["iterations"])
+    w = scenes.pyramid(layers, sleeping=False, **world_settings(s))
     p0 = np.array(w.positions)
     ms, _ = run_for(w, 5.0, s["dt"])
     return ms, float(np.linalg.norm(w.positions - p0, axis=1).max())
@@ -181,7 +193,7 @@ def main() -> None:
         fig, ax = plt.subplots(figsize=(7.5, 5))
         style = {"wmo": ("o", "-"), "pybullet": ("s", "--"), "mujoco": ("^", ":")}
         for engine in engines:
-            for knob in ("dt", "substeps", "iterations"):
+            for knob in KNOBS:
                 pts = [(r["ms_per_sim_second"], r["error"], r["value"]) for r in rows
                        if r["engine"] == engine and r["case"] == case and r["knob"] == knob]
                 if not pts:
