@@ -10,10 +10,10 @@
 // parallelism is (Box2D v3's "wide" contact solver; SCENES.md measures scalar code on
 // the pyramid's contact graph at 6.6x below an 8-wide version).
 //
-// The kernels are compiled twice (GCC target_clones): for AVX2 (4 doubles per
-// instruction) and for the baseline x86-64 (SSE2, two halves); the loader picks one
-// for the processor. No fused multiply-add is enabled in either, so both compute the
-// same bits.
+// On x86-64 the kernels are compiled twice (GCC target_clones): for AVX2 (4 doubles per
+// instruction) and for the baseline (SSE2, two halves); the loader picks one for the
+// processor. No fused multiply-add is enabled in either, so both compute the same
+// bits. Other processors get one portable build of the same source.
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -29,6 +29,14 @@ constexpr int L = WideContacts::kLanes;
 using Group = WideContacts::Group;
 
 #define WMO_INLINE inline __attribute__((always_inline))
+// Two builds of each kernel on x86-64 (AVX2 and the baseline), picked at load time;
+// one elsewhere (aarch64: NEON 2-wide halves), or when WMO_WIDE_NO_CLONES asks for the
+// baseline alone (the test that runs that build on AVX2 machines too).
+#if defined(__x86_64__) && !defined(WMO_WIDE_NO_CLONES)
+#define WMO_CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define WMO_CLONES
+#endif
 
 WMO_INLINE v4 ld(const Real* p) {
   v4 r;
@@ -116,7 +124,7 @@ WMO_INLINE V3 relative_velocity(const Bodies& a, const Bodies& b, const V3& ra, 
   return (b.v + cross(b.w, rb)) - (a.v + cross(a.w, ra));
 }
 
-__attribute__((target_clones("avx2", "default"))) void warm_start_groups(const Group* groups, int count,
+WMO_CLONES void warm_start_groups(const Group* groups, int count,
                                                                          std::vector<BodyState>& states) {
   for (int k = 0; k < count; ++k) {
     const Group& g = groups[k];
@@ -134,7 +142,7 @@ __attribute__((target_clones("avx2", "default"))) void warm_start_groups(const G
   }
 }
 
-__attribute__((target_clones("avx2", "default"))) void solve_groups(Group* groups, int count,
+WMO_CLONES void solve_groups(Group* groups, int count,
                                                                     std::vector<BodyState>& states,
                                                                     const Softness& soft, Real inv_h,
                                                                     Real push_max, bool use_bias) {
