@@ -28,6 +28,11 @@ typedef long long m4 __attribute__((vector_size(32)));
 constexpr int L = WideContacts::kLanes;
 using Group = WideContacts::Group;
 
+/// A body the passes change; the others (zero inverse mass: static and kinematic) only
+/// receive exact zeros, so constraints may share them. The level order and the grouping
+/// use the same test, so that the groups fill.
+inline bool moves(const BodyState& s) { return s.inv_mass > 0; }
+
 #define WMO_INLINE inline __attribute__((always_inline))
 // Two builds of each kernel on x86-64 (AVX2 and the baseline), picked at load time;
 // one elsewhere (aarch64: NEON 2-wide halves), or when WMO_WIDE_NO_CLONES asks for the
@@ -229,7 +234,7 @@ void dependency_level_order(const std::vector<ContactConstraint>& cs, const std:
   int levels = 0;
   for (std::size_t k = 0; k < total; ++k) {
     const ContactConstraint& c = cs[k];
-    const bool da = states[c.body_a].inv_mass > 0, db = states[c.body_b].inv_mass > 0;
+    const bool da = moves(states[c.body_a]), db = moves(states[c.body_b]);
     const int level = std::max(da ? body_level[c.body_a] : 0, db ? body_level[c.body_b] : 0);
     if (da) body_level[c.body_a] = level + 1;
     if (db) body_level[c.body_b] = level + 1;
@@ -264,7 +269,7 @@ void WideContacts::build(const std::vector<ContactConstraint>& cs, const std::ve
       bool independent = true;
       for (int l = 0; l < lanes && independent; ++l)
         for (const int body : {c.body_a, c.body_b})
-          if (states[body].inv_mass > 0 && (body == g.body_a[l] || body == g.body_b[l])) independent = false;
+          if (moves(states[body]) && (body == g.body_a[l] || body == g.body_b[l])) independent = false;
       if (!independent) break;
       g.body_a[lanes] = c.body_a;
       g.body_b[lanes] = c.body_b;

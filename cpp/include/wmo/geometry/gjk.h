@@ -749,7 +749,6 @@ class Epa {
   }
   Real flat_tol() const { return kEpaFlatRel * std::max(scale_, DBL_MIN); }
 
-
   // ---- Blow-up: grow GJK's 1-, 2- or 3-vertex simplex (the origin on a vertex, edge or
   // triangle of A - B) to a tetrahedron containing the origin. When A - B itself is
   // flat (a point, segment or polygon: e.g. sphere and capsule cores), the
