@@ -5,7 +5,8 @@
 // `pairs` is an optional comma-separated list of pair names (e.g. box_box,hull_hull) to
 // run only those; the CSVs then hold only them. The environment variable
 // WMO_BENCH_METHODS (comma-separated method names) likewise limits the methods timed,
-// which is how a profiler is pointed at one routine.
+// which is how a profiler is pointed at one routine; WMO_BENCH_BY_CLASS=1 also prints the
+// time per configuration class (deep, barely overlapping, barely separated, far).
 // Writes out_dir/narrowphase.csv, out_dir/tolerance_sweep.csv, out_dir/reference_check.csv.
 //
 // What each method computes, per configuration (the same question for all: "do A and B
@@ -310,6 +311,16 @@ int main(int argc, char** argv) {
           << ',' << n_overlap << ',' << (n - n_overlap) << ',' << e.wrong_verdicts << '\n';
       std::printf("%-18s %-15s %10.1f ns  err median %-10s max %-10s wrong verdicts %d\n", p.name, m.name, ns,
                   fmt(e.median_error).c_str(), fmt(e.max_error).c_str(), e.wrong_verdicts);
+      if (std::getenv("WMO_BENCH_BY_CLASS")) {
+        // Diagnosis: the time per configuration class (cases[i] has class i % 4).
+        static const char* kClassNames[] = {"deep", "barely_overlapping", "barely_separated", "far"};
+        for (int k = 0; k < 4; ++k) {
+          std::vector<Case> sub;  // moved out and back: Case is move-only
+          for (std::size_t i = k; i < cases.size(); i += 4) sub.push_back(std::move(cases[i]));
+          std::printf("%-18s %-15s   %-20s %10.1f ns\n", "", "", kClassNames[k], time_ns(sub, m.q, R));
+          for (std::size_t i = k, j = 0; i < cases.size(); i += 4, ++j) cases[i] = std::move(sub[j]);
+        }
+      }
     }
 
     if (only_methods) continue;  // profiling one method: no reference check, no sweep

@@ -1,16 +1,21 @@
 // The contact solver's passes on lane groups (WideContacts, contact_solver.h).
 //
-// Each group holds up to four constraints with no dynamic body in common; a pass
-// gathers the group's bodies into 4-wide registers (one lane per constraint), runs the
+// Each group holds up to eight constraints with no dynamic body in common; a pass
+// gathers the group's bodies into 8-wide registers (one lane per constraint), runs the
 // rows of contact_solver.cpp for all lanes at once, and scatters the velocities back.
 // The rows are the same arithmetic as the scalar solver's (normal rows of points 0..3,
-// then their friction rows, per constraint), written out component by component so
-// that four constraints share each instruction. Within one constraint every row
-// depends on the previous one; across lanes nothing does, which is where the
-// parallelism is (Box2D v3's "wide" contact solver; SCENES.md measures scalar code on
-// the pyramid's contact graph at 6.6x below an 8-wide version).
+// then their friction rows, per constraint), in single precision, written out
+// component by component so that eight constraints share each instruction. Within one
+// constraint every row depends on the previous one; across lanes nothing does, which
+// is where the parallelism is (Box2D v3's "wide" contact solver; SCENES.md measures
+// scalar code on the pyramid's contact graph at 6.6x below an 8-wide version).
 //
-// On x86-64 the kernels are compiled twice (GCC target_clones): for AVX2 (4 doubles per
+// The bodies the passes touch are copied into a compact array of 64-byte rows (v, w,
+// dp, dq in float), numbered in the order the groups first use them, so a pass reads
+// one cache line per body instead of a 208-byte double state; masses and inertias
+// travel with the constraints (they are fixed for the step).
+//
+// On x86-64 the kernels are compiled twice (GCC target_clones): for AVX2 (8 floats per
 // instruction) and for the baseline (SSE2, two halves); the loader picks one for the
 // processor. No fused multiply-add is enabled in either, so both compute the same
 // bits. Other processors get one portable build of the same source.
@@ -23,10 +28,11 @@
 namespace wmo {
 namespace {
 
-typedef double v4 __attribute__((vector_size(32)));
-typedef long long m4 __attribute__((vector_size(32)));
+typedef float v8 __attribute__((vector_size(32)));
+typedef int m8 __attribute__((vector_size(32)));
 constexpr int L = WideContacts::kLanes;
 using Group = WideContacts::Group;
+using Row = WideContacts::Row;
 
 /// A body the passes change; the others (zero inverse mass: static and kinematic) only
 /// receive exact zeros, so constraints may share them. The level order and the grouping
@@ -35,7 +41,7 @@ inline bool moves(const BodyState& s) { return s.inv_mass > 0; }
 
 #define WMO_INLINE inline __attribute__((always_inline))
 // Two builds of each kernel on x86-64 (AVX2 and the baseline), picked at load time;
-// one elsewhere (aarch64: NEON 2-wide halves), or when WMO_WIDE_NO_CLONES asks for the
+// one elsewhere (aarch64: NEON 4-wide halves), or when WMO_WIDE_NO_CLONES asks for the
 // baseline alone (the test that runs that build on AVX2 machines too).
 #if defined(__x86_64__) && !defined(WMO_WIDE_NO_CLONES)
 #define WMO_CLONES __attribute__((target_clones("avx2", "default")))
@@ -43,24 +49,24 @@ inline bool moves(const BodyState& s) { return s.inv_mass > 0; }
 #define WMO_CLONES
 #endif
 
-WMO_INLINE v4 ld(const Real* p) {
-  v4 r;
+WMO_INLINE v8 ld(const float* p) {
+  v8 r;
   std::memcpy(&r, p, sizeof r);
   return r;
 }
-WMO_INLINE void st(Real* p, v4 v) { std::memcpy(p, &v, sizeof v); }
-WMO_INLINE v4 splat(Real x) { return v4{x, x, x, x}; }
+WMO_INLINE void st(float* p, v8 v) { std::memcpy(p, &v, sizeof v); }
+WMO_INLINE v8 splat(float x) { return v8{x, x, x, x, x, x, x, x}; }
 /// std::max(a, b) lane by lane: (a < b) ? b : a.
-WMO_INLINE v4 vmax(v4 a, v4 b) { return a < b ? b : a; }
+WMO_INLINE v8 vmax(v8 a, v8 b) { return a < b ? b : a; }
 
 struct V3 {
-  v4 x, y, z;
+  v8 x, y, z;
 };
-WMO_INLINE V3 ld3(const Real (*p)[L]) { return V3{ld(p[0]), ld(p[1]), ld(p[2])}; }
+WMO_INLINE V3 ld3(const float (*p)[L]) { return V3{ld(p[0]), ld(p[1]), ld(p[2])}; }
 WMO_INLINE V3 operator+(const V3& a, const V3& b) { return V3{a.x + b.x, a.y + b.y, a.z + b.z}; }
 WMO_INLINE V3 operator-(const V3& a, const V3& b) { return V3{a.x - b.x, a.y - b.y, a.z - b.z}; }
-WMO_INLINE V3 operator*(v4 s, const V3& a) { return V3{s * a.x, s * a.y, s * a.z}; }
-WMO_INLINE v4 dot(const V3& a, const V3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+WMO_INLINE V3 operator*(v8 s, const V3& a) { return V3{s * a.x, s * a.y, s * a.z}; }
+WMO_INLINE v8 dot(const V3& a, const V3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
 WMO_INLINE V3 cross(const V3& a, const V3& b) {
   return V3{a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
 }
@@ -68,157 +74,178 @@ WMO_INLINE V3 cross(const V3& a, const V3& b) {
 /// The bodies of one side of a group, lane by lane.
 struct Bodies {
   V3 v, w, dp;
-  v4 qx, qy, qz, qw;  // dq
-  v4 inv_mass;
-  v4 i[3][3];  // world inverse inertia, i[row][col]
+  v8 qx, qy, qz, qw;  // dq
 };
 
-WMO_INLINE void gather(const std::array<int, L>& idx, const std::vector<BodyState>& s, Bodies& b) {
-  const BodyState& s0 = s[idx[0]];
-  const BodyState& s1 = s[idx[1]];
-  const BodyState& s2 = s[idx[2]];
-  const BodyState& s3 = s[idx[3]];
-  auto lanes = [&](auto f) { return v4{f(s0), f(s1), f(s2), f(s3)}; };
-  b.v = V3{lanes([](const BodyState& x) { return x.v.x(); }), lanes([](const BodyState& x) { return x.v.y(); }),
-           lanes([](const BodyState& x) { return x.v.z(); })};
-  b.w = V3{lanes([](const BodyState& x) { return x.w.x(); }), lanes([](const BodyState& x) { return x.w.y(); }),
-           lanes([](const BodyState& x) { return x.w.z(); })};
-  b.dp = V3{lanes([](const BodyState& x) { return x.dp.x(); }), lanes([](const BodyState& x) { return x.dp.y(); }),
-            lanes([](const BodyState& x) { return x.dp.z(); })};
-  b.qx = lanes([](const BodyState& x) { return x.dq.x(); });
-  b.qy = lanes([](const BodyState& x) { return x.dq.y(); });
-  b.qz = lanes([](const BodyState& x) { return x.dq.z(); });
-  b.qw = lanes([](const BodyState& x) { return x.dq.w(); });
-  b.inv_mass = lanes([](const BodyState& x) { return x.inv_mass; });
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c)
-      b.i[r][c] = v4{s0.inv_inertia(r, c), s1.inv_inertia(r, c), s2.inv_inertia(r, c), s3.inv_inertia(r, c)};
+/// Symmetric inverse inertia, lane by lane (xx, yy, zz, xy, xz, yz).
+struct Inertia {
+  v8 xx, yy, zz, xy, xz, yz;
+};
+WMO_INLINE Inertia ld_inertia(const float (*p)[L]) {
+  return Inertia{ld(p[0]), ld(p[1]), ld(p[2]), ld(p[3]), ld(p[4]), ld(p[5])};
+}
+WMO_INLINE V3 mul(const Inertia& m, const V3& x) {
+  return V3{m.xx * x.x + m.xy * x.y + m.xz * x.z, m.xy * x.x + m.yy * x.y + m.yz * x.z,
+            m.xz * x.x + m.yz * x.y + m.zz * x.z};
 }
 
-/// Velocities back; dp and dq are not changed by the passes.
-WMO_INLINE void scatter(const std::array<int, L>& idx, const Bodies& b, std::vector<BodyState>& s) {
+WMO_INLINE void gather_velocities(const std::array<int, L>& idx, const Row* rows, Bodies& b) {
+  const Row* r[L];
+  for (int l = 0; l < L; ++l) r[l] = rows + idx[l];
+  auto lanes = [&](auto f) { return v8{f(*r[0]), f(*r[1]), f(*r[2]), f(*r[3]), f(*r[4]), f(*r[5]), f(*r[6]), f(*r[7])}; };
+  b.v = V3{lanes([](const Row& x) { return x.v[0]; }), lanes([](const Row& x) { return x.v[1]; }),
+           lanes([](const Row& x) { return x.v[2]; })};
+  b.w = V3{lanes([](const Row& x) { return x.w[0]; }), lanes([](const Row& x) { return x.w[1]; }),
+           lanes([](const Row& x) { return x.w[2]; })};
+}
+
+WMO_INLINE void gather_motion(const std::array<int, L>& idx, const Row* rows, Bodies& b) {
+  const Row* r[L];
+  for (int l = 0; l < L; ++l) r[l] = rows + idx[l];
+  auto lanes = [&](auto f) { return v8{f(*r[0]), f(*r[1]), f(*r[2]), f(*r[3]), f(*r[4]), f(*r[5]), f(*r[6]), f(*r[7])}; };
+  b.dp = V3{lanes([](const Row& x) { return x.dp[0]; }), lanes([](const Row& x) { return x.dp[1]; }),
+            lanes([](const Row& x) { return x.dp[2]; })};
+  b.qx = lanes([](const Row& x) { return x.dq[0]; });
+  b.qy = lanes([](const Row& x) { return x.dq[1]; });
+  b.qz = lanes([](const Row& x) { return x.dq[2]; });
+  b.qw = lanes([](const Row& x) { return x.dq[3]; });
+}
+
+/// Velocities back. Lanes that share a body that does not move (static, kinematic, the
+/// padding row) write the same unchanged values.
+WMO_INLINE void scatter(const std::array<int, L>& idx, const Bodies& b, Row* rows) {
   for (int l = 0; l < L; ++l) {
-    BodyState& x = s[idx[l]];
-    x.v = Vec3(b.v.x[l], b.v.y[l], b.v.z[l]);
-    x.w = Vec3(b.w.x[l], b.w.y[l], b.w.z[l]);
+    Row& x = rows[idx[l]];
+    x.v[0] = b.v.x[l];
+    x.v[1] = b.v.y[l];
+    x.v[2] = b.v.z[l];
+    x.w[0] = b.w.x[l];
+    x.w[1] = b.w.y[l];
+    x.w[2] = b.w.z[l];
   }
 }
 
-/// dq * r (Eigen's quaternion-vector product: uv = q x r, uv += uv, r + w uv + q x uv).
-WMO_INLINE V3 rotate(const Bodies& b, const V3& r) {
+/// dq * r - r, the anchor's displacement by the rotation since the step began (Eigen's
+/// quaternion-vector product without its leading r: uv = 2 q x r, w uv + q x uv), so
+/// that no large anchor is added and cancelled again.
+WMO_INLINE V3 rotation_offset(const Bodies& b, const V3& r) {
   const V3 q{b.qx, b.qy, b.qz};
   V3 uv = cross(q, r);
   uv = uv + uv;
-  return r + b.qw * uv + cross(q, uv);
-}
-
-WMO_INLINE V3 mul(const v4 (&m)[3][3], const V3& x) {
-  return V3{m[0][0] * x.x + m[0][1] * x.y + m[0][2] * x.z, m[1][0] * x.x + m[1][1] * x.y + m[1][2] * x.z,
-            m[2][0] * x.x + m[2][1] * x.y + m[2][2] * x.z};
+  return b.qw * uv + cross(q, uv);
 }
 
 /// apply() of contact_solver.cpp: impulse p at anchors ra (on a) and rb (on b).
-WMO_INLINE void apply(Bodies& a, Bodies& b, const V3& ra, const V3& rb, const V3& p) {
-  a.v = a.v - a.inv_mass * p;
-  a.w = a.w - mul(a.i, cross(ra, p));
-  b.v = b.v + b.inv_mass * p;
-  b.w = b.w + mul(b.i, cross(rb, p));
+WMO_INLINE void apply(Bodies& a, Bodies& b, v8 ima, v8 imb, const Inertia& ia, const Inertia& ib, const V3& ra,
+                      const V3& rb, const V3& p) {
+  a.v = a.v - ima * p;
+  a.w = a.w - mul(ia, cross(ra, p));
+  b.v = b.v + imb * p;
+  b.w = b.w + mul(ib, cross(rb, p));
 }
 
 WMO_INLINE V3 relative_velocity(const Bodies& a, const Bodies& b, const V3& ra, const V3& rb) {
   return (b.v + cross(b.w, rb)) - (a.v + cross(a.w, ra));
 }
 
-WMO_CLONES void warm_start_groups(const Group* groups, int count,
-                                                                         std::vector<BodyState>& states) {
+WMO_CLONES void warm_start_groups(const Group* groups, int count, Row* rows) {
   for (int k = 0; k < count; ++k) {
     const Group& g = groups[k];
     Bodies a{}, b{};
-    gather(g.body_a, states, a);
-    gather(g.body_b, states, b);
+    gather_velocities(g.row_a, rows, a);
+    gather_velocities(g.row_b, rows, b);
+    const v8 ima = ld(g.inv_mass_a), imb = ld(g.inv_mass_b);
+    const Inertia ia = ld_inertia(g.ia), ib = ld_inertia(g.ib);
     const V3 n = ld3(g.n), t1 = ld3(g.t1), t2 = ld3(g.t2);
     for (int j = 0; j < g.points; ++j) {
       const Group::Point& p = g.p[j];
       const V3 imp = ld(p.normal_impulse) * n + ld(p.tangent_impulse[0]) * t1 + ld(p.tangent_impulse[1]) * t2;
-      apply(a, b, ld3(p.ra), ld3(p.rb), imp);
+      apply(a, b, ima, imb, ia, ib, ld3(p.ra), ld3(p.rb), imp);
     }
-    scatter(g.body_a, a, states);
-    scatter(g.body_b, b, states);
+    scatter(g.row_a, a, rows);
+    scatter(g.row_b, b, rows);
   }
 }
 
-WMO_CLONES void solve_groups(Group* groups, int count,
-                                                                    std::vector<BodyState>& states,
-                                                                    const Softness& soft, Real inv_h,
-                                                                    Real push_max, bool use_bias) {
-  const v4 zero = splat(0), one = splat(1), vinv_h = splat(inv_h);
-  const v4 bias_rate = splat(soft.bias_rate), neg_push = splat(-push_max);
-  const v4 soft_mass = splat(use_bias ? soft.mass_scale : 1);
-  const v4 soft_impulse = splat(use_bias ? soft.impulse_scale : 0);
+WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, float bias_rate_s, float mass_scale_s,
+                             float impulse_scale_s, float inv_h, float push_max, bool use_bias) {
+  const v8 zero = splat(0), one = splat(1), vinv_h = splat(inv_h);
+  const v8 bias_rate = splat(bias_rate_s), neg_push = splat(-push_max);
+  const v8 soft_mass = splat(use_bias ? mass_scale_s : 1);
+  const v8 soft_impulse = splat(use_bias ? impulse_scale_s : 0);
   for (int k = 0; k < count; ++k) {
     Group& g = groups[k];
     Bodies a{}, b{};
-    gather(g.body_a, states, a);
-    gather(g.body_b, states, b);
+    gather_velocities(g.row_a, rows, a);
+    gather_velocities(g.row_b, rows, b);
+    gather_motion(g.row_a, rows, a);
+    gather_motion(g.row_b, rows, b);
+    const v8 ima = ld(g.inv_mass_a), imb = ld(g.inv_mass_b);
+    const Inertia ia = ld_inertia(g.ia), ib = ld_inertia(g.ib);
     const V3 n = ld3(g.n);
+    const V3 dp = b.dp - a.dp;
     for (int j = 0; j < g.points; ++j) {
       Group::Point& p = g.p[j];
       const V3 ra = ld3(p.ra), rb = ld3(p.rb);
-      // Separation now (solve_contacts: anchors rotated by the rotation deltas).
-      const V3 d = (b.dp + rotate(b, rb)) - (a.dp + rotate(a, ra));
-      const v4 s = dot(n, d) + ld(p.adjusted_separation);
+      // Separation now: at the step's start plus the change the motion made.
+      const V3 d = dp + (rotation_offset(b, rb) - rotation_offset(a, ra));
+      const v8 s = dot(n, d) + ld(p.base_separation);
       // s > 0: speculative (bias s / h, full mass, no decay); otherwise the soft bias
       // when use_bias, else none.
-      const m4 spec = s > zero;
-      const v4 soft_bias = use_bias ? vmax(bias_rate * s, neg_push) : zero;
-      const v4 bias = spec ? s * vinv_h : soft_bias;
-      const v4 mass_scale = spec ? one : soft_mass;
-      const v4 impulse_scale = spec ? zero : soft_impulse;
-      const v4 vn = dot(n, relative_velocity(a, b, ra, rb));
-      const v4 ni = ld(p.normal_impulse);
-      v4 impulse = -ld(p.normal_mass) * mass_scale * (vn + bias) - impulse_scale * ni;
-      const v4 next = vmax(ni + impulse, zero);
+      const m8 spec = s > zero;
+      const v8 soft_bias = use_bias ? vmax(bias_rate * s, neg_push) : zero;
+      const v8 bias = spec ? s * vinv_h : soft_bias;
+      const v8 mass_scale = spec ? one : soft_mass;
+      const v8 impulse_scale = spec ? zero : soft_impulse;
+      const v8 vn = dot(n, relative_velocity(a, b, ra, rb));
+      const v8 ni = ld(p.normal_impulse);
+      v8 impulse = -ld(p.normal_mass) * mass_scale * (vn + bias) - impulse_scale * ni;
+      const v8 next = vmax(ni + impulse, zero);
       impulse = next - ni;
       st(p.normal_impulse, next);
-      const v4 max_ni = ld(p.max_normal_impulse);
-      const m4 first = (impulse > zero) & (max_ni == zero);
+      const v8 max_ni = ld(p.max_normal_impulse);
+      const m8 first = (impulse > zero) & (max_ni == zero);
       st(p.relative_velocity, first ? vn : ld(p.relative_velocity));
       st(p.push_gap, first ? vmax(s, zero) : ld(p.push_gap));
       st(p.max_normal_impulse, vmax(max_ni, impulse));
-      apply(a, b, ra, rb, impulse * n);
+      apply(a, b, ima, imb, ia, ib, ra, rb, impulse * n);
     }
     if (g.friction) {
       const V3 t1 = ld3(g.t1), t2 = ld3(g.t2);
-      const v4 mu = ld(g.mu);
-      const m4 has_mu = mu != zero;
+      const v8 mu = ld(g.mu);
+      const m8 has_mu = mu != zero;
       for (int j = 0; j < g.points; ++j) {
         Group::Point& p = g.p[j];
         const V3 ra = ld3(p.ra), rb = ld3(p.rb);
         const V3 dv = relative_velocity(a, b, ra, rb);
-        const v4 ti0 = ld(p.tangent_impulse[0]), ti1 = ld(p.tangent_impulse[1]);
-        v4 x0 = ti0 - ld(p.tangent_mass[0]) * dot(t1, dv);
-        v4 x1 = ti1 - ld(p.tangent_mass[1]) * dot(t2, dv);
+        const v8 ti0 = ld(p.tangent_impulse[0]), ti1 = ld(p.tangent_impulse[1]);
+        v8 x0 = ti0 - ld(p.tangent_mass[0]) * dot(t1, dv);
+        v8 x1 = ti1 - ld(p.tangent_mass[1]) * dot(t2, dv);
         // Coulomb cone (solve_contacts): back onto the circle of radius mu lambda_n.
-        const v4 limit = mu * ld(p.normal_impulse);
-        const v4 len2 = x0 * x0 + x1 * x1;
-        const m4 over = len2 > limit * limit;
-        v4 scale = one;
-        for (int l = 0; l < L; ++l)
-          if (over[l]) scale[l] = len2[l] > 0 ? limit[l] / std::sqrt(len2[l]) : 0;
-        x0 = over ? x0 * scale : x0;
-        x1 = over ? x1 * scale : x1;
+        const v8 limit = mu * ld(p.normal_impulse);
+        const v8 len2 = x0 * x0 + x1 * x1;
+        const m8 over = len2 > limit * limit;
+        int any_over = 0;
+        for (int l = 0; l < L; ++l) any_over |= over[l];
+        if (any_over) {
+          v8 scale = one;
+          for (int l = 0; l < L; ++l)
+            if (over[l]) scale[l] = len2[l] > 0 ? limit[l] / std::sqrt(len2[l]) : 0;
+          x0 = over ? x0 * scale : x0;
+          x1 = over ? x1 * scale : x1;
+        }
         // Lanes without friction keep their tangent impulses, as the scalar pass skips
         // their friction rows.
         x0 = has_mu ? x0 : ti0;
         x1 = has_mu ? x1 : ti1;
-        const v4 d0 = x0 - ti0, d1 = x1 - ti1;
+        const v8 d0 = x0 - ti0, d1 = x1 - ti1;
         st(p.tangent_impulse[0], x0);
         st(p.tangent_impulse[1], x1);
-        apply(a, b, ra, rb, d0 * t1 + d1 * t2);
+        apply(a, b, ima, imb, ia, ib, ra, rb, d0 * t1 + d1 * t2);
       }
     }
-    scatter(g.body_a, a, states);
-    scatter(g.body_b, b, states);
+    scatter(g.row_a, a, rows);
+    scatter(g.row_b, b, rows);
   }
 }
 
@@ -256,11 +283,35 @@ void WideContacts::build(const std::vector<ContactConstraint>& cs, const std::ve
                          const std::vector<BodyState>& states, int dummy) {
   groups_.clear();
   source_.clear();
+  // Rows: 0 for the padding lanes, then the bodies in the order the groups use them.
+  row_of_.assign(states.size(), -1);
+  row_state_.assign(1, dummy);
+  row_moves_.assign(1, 0);
+  row_of_[dummy] = 0;
+  auto row = [&](int body) {
+    int& r = row_of_[body];
+    if (r < 0) {
+      r = static_cast<int>(row_state_.size());
+      row_state_.push_back(body);
+      row_moves_.push_back(moves(states[body]) ? 1 : 0);
+    }
+    return r;
+  };
+  auto pack_inertia = [](const Mat3& m, float (*out)[L], int lane) {
+    out[0][lane] = static_cast<float>(m(0, 0));
+    out[1][lane] = static_cast<float>(m(1, 1));
+    out[2][lane] = static_cast<float>(m(2, 2));
+    out[3][lane] = static_cast<float>(m(0, 1));
+    out[4][lane] = static_cast<float>(m(0, 2));
+    out[5][lane] = static_cast<float>(m(1, 2));
+  };
   const int count = static_cast<int>(order.size());
   for (int q = 0; q < count;) {
     Group& g = groups_.emplace_back();
     g.body_a.fill(dummy);
     g.body_b.fill(dummy);
+    g.row_a.fill(0);
+    g.row_b.fill(0);
     int lanes = 0;
     while (lanes < L && q < count) {
       const int k = order[q];
@@ -271,33 +322,43 @@ void WideContacts::build(const std::vector<ContactConstraint>& cs, const std::ve
         for (const int body : {c.body_a, c.body_b})
           if (moves(states[body]) && (body == g.body_a[l] || body == g.body_b[l])) independent = false;
       if (!independent) break;
+      const BodyState& sa = states[c.body_a];
+      const BodyState& sb = states[c.body_b];
       g.body_a[lanes] = c.body_a;
       g.body_b[lanes] = c.body_b;
+      g.row_a[lanes] = row(c.body_a);
+      g.row_b[lanes] = row(c.body_b);
+      g.inv_mass_a[lanes] = static_cast<float>(sa.inv_mass);
+      g.inv_mass_b[lanes] = static_cast<float>(sb.inv_mass);
+      pack_inertia(sa.inv_inertia, g.ia, lanes);
+      pack_inertia(sb.inv_inertia, g.ib, lanes);
       for (int r = 0; r < 3; ++r) {
-        g.n[r][lanes] = c.normal[r];
-        g.t1[r][lanes] = c.tangent1[r];
-        g.t2[r][lanes] = c.tangent2[r];
+        g.n[r][lanes] = static_cast<float>(c.normal[r]);
+        g.t1[r][lanes] = static_cast<float>(c.tangent1[r]);
+        g.t2[r][lanes] = static_cast<float>(c.tangent2[r]);
       }
-      g.mu[lanes] = c.friction;
+      g.mu[lanes] = static_cast<float>(c.friction);
       g.friction = g.friction || c.friction != 0;
       g.points = std::max(g.points, c.count);
       for (int j = 0; j < c.count; ++j) {
         const ContactConstraintPoint& cp = c.points[j];
         Group::Point& p = g.p[j];
         for (int r = 0; r < 3; ++r) {
-          p.ra[r][lanes] = cp.ra[r];
-          p.rb[r][lanes] = cp.rb[r];
+          p.ra[r][lanes] = static_cast<float>(cp.ra[r]);
+          p.rb[r][lanes] = static_cast<float>(cp.rb[r]);
         }
-        p.adjusted_separation[lanes] = cp.adjusted_separation;
-        p.normal_mass[lanes] = cp.normal_mass;
-        p.tangent_mass[0][lanes] = cp.tangent_mass[0];
-        p.tangent_mass[1][lanes] = cp.tangent_mass[1];
-        p.normal_impulse[lanes] = cp.normal_impulse;
-        p.tangent_impulse[0][lanes] = cp.tangent_impulse[0];
-        p.tangent_impulse[1][lanes] = cp.tangent_impulse[1];
-        p.max_normal_impulse[lanes] = cp.max_normal_impulse;
-        p.relative_velocity[lanes] = cp.relative_velocity;
-        p.push_gap[lanes] = cp.push_gap;
+        // In double: adjusted_separation carries -n.(rb - ra), which may be large (an
+        // anchor far out on a big ground box) where the separation itself is small.
+        p.base_separation[lanes] = static_cast<float>(cp.adjusted_separation + c.normal.dot(cp.rb - cp.ra));
+        p.normal_mass[lanes] = static_cast<float>(cp.normal_mass);
+        p.tangent_mass[0][lanes] = static_cast<float>(cp.tangent_mass[0]);
+        p.tangent_mass[1][lanes] = static_cast<float>(cp.tangent_mass[1]);
+        p.normal_impulse[lanes] = static_cast<float>(cp.normal_impulse);
+        p.tangent_impulse[0][lanes] = static_cast<float>(cp.tangent_impulse[0]);
+        p.tangent_impulse[1][lanes] = static_cast<float>(cp.tangent_impulse[1]);
+        p.max_normal_impulse[lanes] = static_cast<float>(cp.max_normal_impulse);
+        p.relative_velocity[lanes] = static_cast<float>(cp.relative_velocity);
+        p.push_gap[lanes] = static_cast<float>(cp.push_gap);
       }
       source_.push_back(k);
       ++lanes;
@@ -305,15 +366,56 @@ void WideContacts::build(const std::vector<ContactConstraint>& cs, const std::ve
     }
     for (int l = lanes; l < L; ++l) source_.push_back(-1);
   }
+  rows_.assign(row_state_.size(), Row{});
+  loaded_.assign(row_state_.size(), Row{});
 }
 
-void WideContacts::warm_start(std::vector<BodyState>& states) const {
-  warm_start_groups(groups_.data(), group_count(), states);
+void WideContacts::load(const std::vector<BodyState>& states) {
+  const int n = static_cast<int>(row_state_.size());
+  for (int r = 0; r < n; ++r) {
+    const BodyState& s = states[row_state_[r]];
+    Row& x = rows_[r];
+    for (int c = 0; c < 3; ++c) {
+      x.v[c] = static_cast<float>(s.v[c]);
+      x.w[c] = static_cast<float>(s.w[c]);
+      x.dp[c] = static_cast<float>(s.dp[c]);
+    }
+    x.dq[0] = static_cast<float>(s.dq.x());
+    x.dq[1] = static_cast<float>(s.dq.y());
+    x.dq[2] = static_cast<float>(s.dq.z());
+    x.dq[3] = static_cast<float>(s.dq.w());
+    loaded_[r] = x;
+  }
+}
+
+void WideContacts::store(std::vector<BodyState>& states) const {
+  const int n = static_cast<int>(row_state_.size());
+  for (int r = 1; r < n; ++r) {
+    if (!row_moves_[r]) continue;
+    BodyState& s = states[row_state_[r]];
+    const Row& x = rows_[r];
+    const Row& x0 = loaded_[r];
+    // The change, not the float value: an untouched body keeps its velocity exactly.
+    for (int c = 0; c < 3; ++c) {
+      s.v[c] += static_cast<Real>(x.v[c] - x0.v[c]);
+      s.w[c] += static_cast<Real>(x.w[c] - x0.w[c]);
+    }
+  }
+}
+
+void WideContacts::warm_start(std::vector<BodyState>& states) {
+  load(states);
+  warm_start_groups(groups_.data(), group_count(), rows_.data());
+  store(states);
 }
 
 void WideContacts::solve(std::vector<BodyState>& states, const Softness& soft, Real inv_h, Real push_max,
                          bool use_bias) {
-  solve_groups(groups_.data(), group_count(), states, soft, inv_h, push_max, use_bias);
+  load(states);
+  solve_groups(groups_.data(), group_count(), rows_.data(), static_cast<float>(soft.bias_rate),
+               static_cast<float>(soft.mass_scale), static_cast<float>(soft.impulse_scale),
+               static_cast<float>(inv_h), static_cast<float>(push_max), use_bias);
+  store(states);
 }
 
 void WideContacts::unpack(std::vector<ContactConstraint>& cs) const {

@@ -1,8 +1,8 @@
 // The lane-grouped contact passes (WideContacts) against the scalar reference passes
 // (warm_start_contacts / solve_contacts) on random contact graphs: the grouping only
 // reorders constraints that share no dynamic body, so both must give the same
-// velocities and impulses up to rounding (different but equivalent operation order in
-// the cross and matrix products), whatever the order of the constraints.
+// velocities and impulses up to rounding (the lanes compute in float, the reference in
+// double), whatever the order of the constraints.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -89,26 +89,35 @@ void run_passes(Scene& s, bool wide, int substeps, bool level_order = false) {
   if (wide) w.unpack(s.constraints);
 }
 
-void expect_same(const Scene& a, const Scene& b) {
-  // Velocities of O(1) after a few hundred impulses: rounding differences of the
-  // equivalent operation orders stay within ~1e-13; 1e-9 leaves room and still catches
-  // any row solved in a different (non-commuting) order, which changes results at O(1e-2).
+/// Largest difference between the two scenes' velocities and (unless `velocities_only`)
+/// point impulses.
+Real max_difference(const Scene& a, const Scene& b, bool velocities_only = false) {
+  Real d = 0;
   for (std::size_t i = 0; i + 1 < a.states.size(); ++i) {
-    EXPECT_LT((a.states[i].v - b.states[i].v).norm(), 1e-9) << "body " << i;
-    EXPECT_LT((a.states[i].w - b.states[i].w).norm(), 1e-9) << "body " << i;
+    d = std::max(d, (a.states[i].v - b.states[i].v).norm());
+    d = std::max(d, (a.states[i].w - b.states[i].w).norm());
   }
+  if (velocities_only) return d;
   for (std::size_t k = 0; k < a.constraints.size(); ++k)
     for (int j = 0; j < a.constraints[k].count; ++j) {
       const ContactConstraintPoint& p = a.constraints[k].points[j];
       const ContactConstraintPoint& q = b.constraints[k].points[j];
-      EXPECT_NEAR(p.normal_impulse, q.normal_impulse, 1e-9);
-      EXPECT_NEAR(p.tangent_impulse[0], q.tangent_impulse[0], 1e-9);
-      EXPECT_NEAR(p.tangent_impulse[1], q.tangent_impulse[1], 1e-9);
-      EXPECT_NEAR(p.max_normal_impulse, q.max_normal_impulse, 1e-9);
-      EXPECT_NEAR(p.relative_velocity, q.relative_velocity, 1e-9);
-      EXPECT_NEAR(p.push_gap, q.push_gap, 1e-9);
+      for (const Real x : {p.normal_impulse - q.normal_impulse, p.tangent_impulse[0] - q.tangent_impulse[0],
+                           p.tangent_impulse[1] - q.tangent_impulse[1], p.max_normal_impulse - q.max_normal_impulse,
+                           p.relative_velocity - q.relative_velocity, p.push_gap - q.push_gap})
+        d = std::max(d, std::abs(x));
     }
+  return d;
 }
+
+/// The float lanes against the double reference. Velocities and impulses of O(1) after
+/// four substeps of three passes over up to 500 constraints: each lane operation rounds
+/// by up to 6e-8 (float's half ulp) and a body's velocity goes through a few hundred of
+/// them, measured 1e-6 at most; 2e-5 leaves room and still catches any row solved in a
+/// different (non-commuting) order, which changes results at O(1e-2) (the last test).
+constexpr Real kFloatTolerance = 2e-5;
+
+void expect_same(const Scene& a, const Scene& b) { EXPECT_LT(max_difference(a, b), kFloatTolerance); }
 
 }  // namespace
 
@@ -172,7 +181,7 @@ TEST(WideContacts, AReorderingThatBreaksTheSequenceChangesTheResult) {
   std::reverse(b.constraints.begin(), b.constraints.end());
   run_passes(a, true, 1);
   run_passes(b, true, 1);
-  Real diff = 0;
-  for (std::size_t i = 0; i + 1 < a.states.size(); ++i) diff = std::max(diff, (a.states[i].v - b.states[i].v).norm());
-  EXPECT_GT(diff, 1e-6);
+  // Velocities only: b's constraints are a's in reverse, so their impulses do not pair up.
+  const Real diff = max_difference(a, b, /*velocities_only=*/true);
+  EXPECT_GT(diff, 100 * kFloatTolerance) << diff;
 }

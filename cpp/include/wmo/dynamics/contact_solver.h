@@ -120,56 +120,88 @@ void apply_restitution(std::vector<ContactConstraint>& cs, std::vector<BodyState
 void dependency_level_order(const std::vector<ContactConstraint>& cs, const std::vector<BodyState>& states,
                             std::vector<int>& order, std::vector<int>& scratch);
 
-/// The contacts regrouped for the solver's passes: groups of kWideLanes constraints with
+/// The contacts regrouped for the solver's passes: groups of kLanes (8) constraints with
 /// no dynamic body in common, stored lane by lane (structure of arrays), so each pass
-/// runs one group's rows for all its lanes at once in 4-wide arithmetic (AVX2 where
-/// the processor has it, chosen at run time; two 2-wide halves otherwise). The groups
-/// are formed from consecutive constraints in the given order, a new group starting
-/// whenever the next constraint shares a dynamic body with the current group: the
-/// constraints in a group commute, so the passes compute what the plain Gauss-Seidel
-/// passes (solve_contacts) over that order compute, up to rounding (World passes its
-/// constraints by dependency level, an order equivalent to its sequence that keeps the
-/// groups full). Missing lanes and points are padding with zero mass.
+/// runs one group's rows for all its lanes at once in 8-wide single-precision
+/// arithmetic (AVX2 where the processor has it, chosen at run time; two 4-wide halves
+/// otherwise: Box2D v3's "wide" solver). The groups are formed from consecutive
+/// constraints in the given order, a new group starting whenever the next constraint
+/// shares a dynamic body with the current group: the constraints in a group commute,
+/// so the passes compute what the plain Gauss-Seidel passes (solve_contacts) over that
+/// order compute, up to rounding (World passes its constraints by dependency level,
+/// an order equivalent to its sequence that keeps the groups full). Missing lanes and
+/// points are padding with zero mass.
+///
+/// Precision: the passes work in float (24-bit mantissa, 6e-8 relative) on quantities
+/// that are all relative to the bodies (velocities, anchors from the centres of mass,
+/// the motion since the step began, separations), never on positions, so a scene far
+/// from the origin loses nothing. The separation is carried as its value at the step's
+/// start plus the change the motion makes (n.(dp_b + (dq_b - 1) rb - dp_a - (dq_a - 1)
+/// ra)), not as a large offset cancelled by large anchors. The bodies' double
+/// velocities receive the float passes' velocity *changes*, so a body no impulse
+/// touched keeps its velocity bit for bit.
 class WideContacts {
  public:
-  static constexpr int kLanes = 4;
+  static constexpr int kLanes = 8;
   /// Packs `cs` (prepare_contacts already run) for `states`, visiting the constraints in
   /// `order` (indices into cs, each once; the groups follow it); `dummy` is the index of
   /// a state with zero velocities and zero inverse mass and inertia that padding lanes
-  /// point at (the solver writes only zeros to it).
+  /// point at.
   void build(const std::vector<ContactConstraint>& cs, const std::vector<int>& order,
              const std::vector<BodyState>& states, int dummy);
-  /// The passes of contact_solver.h on the packed contacts.
-  void warm_start(std::vector<BodyState>& states) const;
+  /// The passes of contact_solver.h on the packed contacts: each reads the bodies'
+  /// velocities and motion (v, w, dp, dq) from `states` and adds the velocity changes
+  /// back.
+  void warm_start(std::vector<BodyState>& states);
   void solve(std::vector<BodyState>& states, const Softness& soft, Real inv_h, Real push_max, bool use_bias);
   /// Writes impulses, max_normal_impulse, relative_velocity and push_gap back to `cs`
   /// (the constraints given to build).
   void unpack(std::vector<ContactConstraint>& cs) const;
   int group_count() const { return static_cast<int>(groups_.size()); }
 
-  /// One group: lane l holds constraint source_[4 g + l]. Every quantity is an array
-  /// over the lanes; vectors are stored per component ([3][kLanes]).
+  /// One group: lane l holds constraint source_[kLanes g + l]. Every quantity is an
+  /// array over the lanes; vectors are stored per component ([3][kLanes]).
   struct Group {
-    std::array<int, kLanes> body_a{}, body_b{};
+    std::array<int, kLanes> body_a{}, body_b{};  ///< state indices (`dummy` for padding)
+    std::array<int, kLanes> row_a{}, row_b{};    ///< the bodies' rows in the solver's body array
     int points = 0;           ///< largest point count among the lanes
     bool friction = false;    ///< some lane has friction
-    alignas(32) Real n[3][kLanes] = {}, t1[3][kLanes] = {}, t2[3][kLanes] = {};
-    alignas(32) Real mu[kLanes] = {};
+    alignas(32) float inv_mass_a[kLanes] = {}, inv_mass_b[kLanes] = {};
+    /// World inverse inertia at the step's start, symmetric: xx, yy, zz, xy, xz, yz.
+    alignas(32) float ia[6][kLanes] = {}, ib[6][kLanes] = {};
+    alignas(32) float n[3][kLanes] = {}, t1[3][kLanes] = {}, t2[3][kLanes] = {};
+    alignas(32) float mu[kLanes] = {};
     struct Point {
-      alignas(32) Real ra[3][kLanes] = {}, rb[3][kLanes] = {};
-      alignas(32) Real adjusted_separation[kLanes] = {}, normal_mass[kLanes] = {};
-      alignas(32) Real tangent_mass[2][kLanes] = {};
-      alignas(32) Real normal_impulse[kLanes] = {}, tangent_impulse[2][kLanes] = {};
-      alignas(32) Real max_normal_impulse[kLanes] = {}, relative_velocity[kLanes] = {};
-      alignas(32) Real push_gap[kLanes] = {};
+      alignas(32) float ra[3][kLanes] = {}, rb[3][kLanes] = {};
+      /// Separation at the step's start (m): adjusted_separation + n.(rb - ra).
+      alignas(32) float base_separation[kLanes] = {}, normal_mass[kLanes] = {};
+      alignas(32) float tangent_mass[2][kLanes] = {};
+      alignas(32) float normal_impulse[kLanes] = {}, tangent_impulse[2][kLanes] = {};
+      alignas(32) float max_normal_impulse[kLanes] = {}, relative_velocity[kLanes] = {};
+      alignas(32) float push_gap[kLanes] = {};
     };
     std::array<Point, 4> p{};
   };
   const std::vector<Group>& groups() const { return groups_; }
 
+  /// A body as the passes see it: velocities and the motion since the step began.
+  /// Row 0 is the padding lanes' body (at rest, never written back).
+  struct alignas(64) Row {
+    float v[3], w[3], pad0[2];
+    float dp[3], dq[4], pad1;  ///< dq as x, y, z, w
+  };
+
  private:
+  void load(const std::vector<BodyState>& states);
+  void store(std::vector<BodyState>& states) const;
+
   std::vector<Group> groups_;
-  std::vector<int> source_;  ///< per group and lane: index into cs, or -1 for padding
+  std::vector<int> source_;      ///< per group and lane: index into cs, or -1 for padding
+  std::vector<Row> rows_;        ///< the solver's bodies
+  std::vector<Row> loaded_;      ///< rows_ as load() wrote them (for the velocity changes)
+  std::vector<int> row_state_;   ///< per row: its state index (row 0: dummy)
+  std::vector<int> row_moves_;   ///< per row: 1 if its body moves (receives velocity changes)
+  std::vector<int> row_of_;      ///< per state: its row, -1 if none (build's scratch)
 };
 
 }  // namespace wmo
