@@ -89,40 +89,58 @@ WMO_INLINE V3 mul(const Inertia& m, const V3& x) {
             m.xz * x.x + m.yz * x.y + m.zz * x.z};
 }
 
+/// An 8 x 8 transpose: on return c[j][l] = r[l][j] (the AVX 8 x 8 float transpose:
+/// unpack pairs, shuffle quads, swap 128-bit halves). In place.
+WMO_INLINE void transpose8(v8 (&r)[8]) {
+  v8 t[8], u[8];
+  for (int k = 0; k < 8; k += 2) {
+    t[k] = __builtin_shufflevector(r[k], r[k + 1], 0, 8, 1, 9, 4, 12, 5, 13);
+    t[k + 1] = __builtin_shufflevector(r[k], r[k + 1], 2, 10, 3, 11, 6, 14, 7, 15);
+  }
+  for (int k = 0; k < 8; k += 4) {
+    u[k] = __builtin_shufflevector(t[k], t[k + 2], 0, 1, 8, 9, 4, 5, 12, 13);
+    u[k + 1] = __builtin_shufflevector(t[k], t[k + 2], 2, 3, 10, 11, 6, 7, 14, 15);
+    u[k + 2] = __builtin_shufflevector(t[k + 1], t[k + 3], 0, 1, 8, 9, 4, 5, 12, 13);
+    u[k + 3] = __builtin_shufflevector(t[k + 1], t[k + 3], 2, 3, 10, 11, 6, 7, 14, 15);
+  }
+  for (int k = 0; k < 4; ++k) {
+    r[k] = __builtin_shufflevector(u[k], u[k + 4], 0, 1, 2, 3, 8, 9, 10, 11);
+    r[k + 4] = __builtin_shufflevector(u[k], u[k + 4], 4, 5, 6, 7, 12, 13, 14, 15);
+  }
+}
+
+/// Half `half` (0: v, w; 1: dp, dq) of the 8 rows, transposed: c[j] holds float j of
+/// that half for every lane.
+WMO_INLINE void gather_half(const std::array<int, L>& idx, const Row* rows, int half, v8 (&c)[8]) {
+  for (int l = 0; l < L; ++l) c[l] = ld(reinterpret_cast<const float*>(rows + idx[l]) + 8 * half);
+  transpose8(c);
+}
+
 WMO_INLINE void gather_velocities(const std::array<int, L>& idx, const Row* rows, Bodies& b) {
-  const Row* r[L];
-  for (int l = 0; l < L; ++l) r[l] = rows + idx[l];
-  auto lanes = [&](auto f) { return v8{f(*r[0]), f(*r[1]), f(*r[2]), f(*r[3]), f(*r[4]), f(*r[5]), f(*r[6]), f(*r[7])}; };
-  b.v = V3{lanes([](const Row& x) { return x.v[0]; }), lanes([](const Row& x) { return x.v[1]; }),
-           lanes([](const Row& x) { return x.v[2]; })};
-  b.w = V3{lanes([](const Row& x) { return x.w[0]; }), lanes([](const Row& x) { return x.w[1]; }),
-           lanes([](const Row& x) { return x.w[2]; })};
+  v8 c[8];
+  gather_half(idx, rows, 0, c);
+  b.v = V3{c[0], c[1], c[2]};
+  b.w = V3{c[3], c[4], c[5]};
 }
 
 WMO_INLINE void gather_motion(const std::array<int, L>& idx, const Row* rows, Bodies& b) {
-  const Row* r[L];
-  for (int l = 0; l < L; ++l) r[l] = rows + idx[l];
-  auto lanes = [&](auto f) { return v8{f(*r[0]), f(*r[1]), f(*r[2]), f(*r[3]), f(*r[4]), f(*r[5]), f(*r[6]), f(*r[7])}; };
-  b.dp = V3{lanes([](const Row& x) { return x.dp[0]; }), lanes([](const Row& x) { return x.dp[1]; }),
-            lanes([](const Row& x) { return x.dp[2]; })};
-  b.qx = lanes([](const Row& x) { return x.dq[0]; });
-  b.qy = lanes([](const Row& x) { return x.dq[1]; });
-  b.qz = lanes([](const Row& x) { return x.dq[2]; });
-  b.qw = lanes([](const Row& x) { return x.dq[3]; });
+  v8 c[8];
+  gather_half(idx, rows, 1, c);
+  b.dp = V3{c[0], c[1], c[2]};
+  b.qx = c[3];
+  b.qy = c[4];
+  b.qz = c[5];
+  b.qw = c[6];
 }
 
-/// Velocities back. Lanes that share a body that does not move (static, kinematic, the
-/// padding row) write the same unchanged values.
+/// Velocities back: the first half of each row (v, w, padding). Lanes that share a
+/// body that does not move (static, kinematic, the padding row) write the same
+/// unchanged values.
 WMO_INLINE void scatter(const std::array<int, L>& idx, const Bodies& b, Row* rows) {
-  for (int l = 0; l < L; ++l) {
-    Row& x = rows[idx[l]];
-    x.v[0] = b.v.x[l];
-    x.v[1] = b.v.y[l];
-    x.v[2] = b.v.z[l];
-    x.w[0] = b.w.x[l];
-    x.w[1] = b.w.y[l];
-    x.w[2] = b.w.z[l];
-  }
+  const v8 zero = splat(0);
+  v8 c[8] = {b.v.x, b.v.y, b.v.z, b.w.x, b.w.y, b.w.z, zero, zero};
+  transpose8(c);
+  for (int l = 0; l < L; ++l) st(reinterpret_cast<float*>(rows + idx[l]), c[l]);
 }
 
 /// dq * r - r, the anchor's displacement by the rotation since the step began (Eigen's
