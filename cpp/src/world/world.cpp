@@ -222,10 +222,9 @@ void World::remove_body(BodyId id) {
   // Forget cached contacts of this slot: a later body in the same slot must not inherit
   // its impulses.
   const auto slot = static_cast<std::uint64_t>(id.slot);
-  for (auto it = cache_.begin(); it != cache_.end();) {
-    const std::uint64_t a = it->first >> 40, b = (it->first >> 16) & 0xFFFFFF;
-    it = (a == slot || b == slot) ? cache_.erase(it) : std::next(it);
-  }
+  cache_.erase_if([slot](std::uint64_t key, const CachedManifold&) {
+    return (key >> 40) == slot || ((key >> 16) & 0xFFFFFF) == slot;
+  });
   const int last = body_count() - 1;
   if (i != last) slots_[slot_of_[last]].index = i;
   swap_remove(positions_, i);
@@ -585,10 +584,10 @@ void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseO
   const ManifoldGeometry* reuse = nullptr;
   // A pair of single-manifold shapes has one cache entry (no children): looked up once,
   // for reuse and for warm starting.
-  const auto single = cacheable ? cache_.find(manifold_key(sa, sb, -1, -1)) : cache_.end();
+  const int single = cacheable ? cache_.find(manifold_key(sa, sb, -1, -1)) : -1;
   if (cacheable && settings_.manifold_reuse_distance > 0 && settings_.manifold_reuse_angle > 0) {
-    if (single != cache_.end() && single->second.geometry.valid) {
-      const ManifoldGeometry& g = single->second.geometry;
+    if (single >= 0 && cache_.value(single).geometry.valid) {
+      const ManifoldGeometry& g = cache_.value(single).geometry;
       const Real d2 = (rel_p - g.rel_position).squaredNorm();
       // |q1 . q2| = cos(half the angle between the rotations).
       const Real cos_half = std::abs(rel_q.dot(g.rel_rotation));
@@ -636,7 +635,8 @@ void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseO
   for (const Manifold& m : out.manifolds) {
     if (m.count == 0) continue;
     const std::uint64_t key = manifold_key(sa, sb, m.child_a, m.child_b);
-    const auto cached = cacheable ? single : cache_.find(key);
+    const int cached_index = cacheable ? single : cache_.find(key);
+    const CachedManifold* cached = cached_index >= 0 ? &cache_.value(cached_index) : nullptr;
     ContactConstraint& c = out.constraints.emplace_back();
     c.body_a = a;
     c.body_b = b;
@@ -657,9 +657,9 @@ void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseO
       p.rb = mid - com_b;
       p.adjusted_separation = -cp.depth - m.normal.dot(p.rb - p.ra);
       p.feature_id = cp.feature_id;
-      if (cached != cache_.end()) {
-        for (int j = 0; j < cached->second.count; ++j) {
-          const CachedPoint& old = cached->second.points[j];
+      if (cached) {
+        for (int j = 0; j < cached->count; ++j) {
+          const CachedPoint& old = cached->points[j];
           if (old.feature_id == cp.feature_id) {
             p.normal_impulse = old.normal_impulse;
             p.tangent_impulse = {c.tangent1.dot(old.tangent_impulse), c.tangent2.dot(old.tangent_impulse)};
@@ -670,6 +670,7 @@ void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseO
     }
     out.keys.push_back(key);
     out.geometry.push_back(geometry);
+    out.entries.push_back(cached_index);
   }
 }
 
@@ -736,6 +737,7 @@ void World::run_step() {
   constraints_.clear();
   constraint_keys_.clear();
   constraint_geometry_.clear();
+  constraint_entries_.clear();
   {
     StageTimer t(profile_[kNarrowphase]);
     auto rows = [&](const ProxyPair& pp) {
@@ -773,9 +775,19 @@ void World::run_step() {
       out.constraints.clear();
       out.keys.clear();
       out.geometry.clear();
+      out.entries.clear();
       out.reused = 0;
       const auto [begin, end] = ThreadPool::part(pairs_.size(), t, parts);
+      // The cache entries of the pairs ahead, prefetched in two stages (FlatMap).
+      constexpr std::size_t kSlotAhead = 8, kValueAhead = 4;
+      auto single_key = [&](std::size_t k) {
+        const auto [sa, sb, a, b] = rows(pairs_[k]);
+        return manifold_key(sa, sb, -1, -1);
+      };
+      for (std::size_t k = begin; k < std::min(end, begin + kSlotAhead); ++k) cache_.prefetch_slot(single_key(k));
       for (std::size_t k = begin; k < end; ++k) {
+        if (k + kSlotAhead < end) cache_.prefetch_slot(single_key(k + kSlotAhead));
+        if (k + kValueAhead < end) cache_.prefetch_value(single_key(k + kValueAhead));
         const auto [sa, sb, a, b] = rows(pairs_[k]);
         // At least one awake dynamic body: pairs of sleeping, static and kinematic
         // bodies need no contact.
@@ -788,13 +800,24 @@ void World::run_step() {
     } else {
       for (int t = 0; t < parts; ++t) part(t);  // the same parts, on this thread
     }
+    // Part 0's buffers are swapped in (the old ones go back to it, capacity kept), the
+    // others appended: a copy of every constraint (~650 bytes each) cost 1-2 ms of the
+    // pyramid's step.
     reused_manifolds_ = 0;
     for (int t = 0; t < parts; ++t) {
-      constraints_.insert(constraints_.end(), thread_out_[t].constraints.begin(), thread_out_[t].constraints.end());
-      constraint_keys_.insert(constraint_keys_.end(), thread_out_[t].keys.begin(), thread_out_[t].keys.end());
-      constraint_geometry_.insert(constraint_geometry_.end(), thread_out_[t].geometry.begin(),
-                                  thread_out_[t].geometry.end());
-      reused_manifolds_ += thread_out_[t].reused;
+      NarrowphaseOut& out = thread_out_[t];
+      if (t == 0) {
+        constraints_.swap(out.constraints);
+        constraint_keys_.swap(out.keys);
+        constraint_geometry_.swap(out.geometry);
+        constraint_entries_.swap(out.entries);
+      } else {
+        constraints_.insert(constraints_.end(), out.constraints.begin(), out.constraints.end());
+        constraint_keys_.insert(constraint_keys_.end(), out.keys.begin(), out.keys.end());
+        constraint_geometry_.insert(constraint_geometry_.end(), out.geometry.begin(), out.geometry.end());
+        constraint_entries_.insert(constraint_entries_.end(), out.entries.begin(), out.entries.end());
+      }
+      reused_manifolds_ += out.reused;
     }
     t.set_count(static_cast<long long>(constraints_.size()));
   }
@@ -921,9 +944,13 @@ void World::run_step() {
     // after: clearing and reinserting every entry cost an allocation and a free per
     // manifold per step (measured: 9 ms of the pyramid's step).
     const std::uint64_t stamp = step_count_ + 1;
+    std::size_t fresh = 0;  // distinct entries this step stamps
     for (std::size_t k = 0; k < constraints_.size(); ++k) {
       const ContactConstraint& c = constraints_[k];
-      CachedManifold& cm = cache_[constraint_keys_[k]];
+      // The entry collide_pair found, or a new one.
+      const int entry = constraint_entries_[k] >= 0 ? constraint_entries_[k] : cache_.insert(constraint_keys_[k]);
+      CachedManifold& cm = cache_.value(entry);
+      fresh += cm.stamp != stamp;
       cm.stamp = stamp;
       cm.count = c.count;
       if (!constraint_geometry_[k].keep_cached) cm.geometry = constraint_geometry_[k];
@@ -932,7 +959,10 @@ void World::run_step() {
                                    c.points[j].tangent_impulse[0] * c.tangent1 +
                                        c.points[j].tangent_impulse[1] * c.tangent2};
     }
-    std::erase_if(cache_, [stamp](const auto& entry) { return entry.second.stamp != stamp; });
+    // Stale entries (pairs that stopped touching) dropped; none when every entry was
+    // stamped, the usual case for a resting pile, which then skips the walk.
+    if (cache_.size() != fresh)
+      cache_.erase_if([stamp](std::uint64_t, const CachedManifold& cm) { return cm.stamp != stamp; });
   }
   // ---- update_sleep ----
   {

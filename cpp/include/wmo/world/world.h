@@ -30,6 +30,7 @@
 #include "wmo/collision/narrowphase.h"
 #include "wmo/dynamics/body.h"
 #include "wmo/dynamics/contact_solver.h"
+#include "wmo/world/flat_map.h"
 #include "wmo/world/shared_array.h"
 #include "wmo/world/thread_pool.h"
 
@@ -280,6 +281,10 @@ class World {
     std::vector<ContactConstraint> constraints;
     std::vector<std::uint64_t> keys;
     std::vector<ManifoldGeometry> geometry;  // per constraint
+    /// Per constraint: the index of its cache entry if it had one (found in
+    /// collide_pair; indices stay valid while entries are added), else -1, so
+    /// store_impulses does not look it up again.
+    std::vector<int> entries;
     long long reused = 0;  // manifolds taken from the cache
   };
   /// Contact constraints of one pair (slots sa < sb, rows a, b) appended to out.
@@ -370,13 +375,14 @@ class World {
   std::vector<ContactConstraint> constraints_;
   std::vector<std::uint64_t> constraint_keys_;
   std::vector<ManifoldGeometry> constraint_geometry_;  ///< per constraint, for the cache
+  std::vector<int> constraint_entries_;  ///< per constraint (NarrowphaseOut::entries)
   /// The order the solver visits constraints_ in (dependency_level_order) and its scratch.
   std::vector<int> solve_order_, level_scratch_;
   WideContacts wide_;  ///< the solver's lane-grouped copy of constraints_ (contact_solver.h)
   // Scratch of order_pairs_top_down (kept to avoid allocating every step).
   std::vector<std::uint64_t> order_scratch_;
   std::vector<ProxyPair> pair_scratch_;
-  std::unordered_map<std::uint64_t, CachedManifold> cache_;
+  FlatMap<CachedManifold> cache_;  ///< by manifold_key
   long long reused_manifolds_ = 0;
 
   std::array<StageProfile, kStageNames.size()> profile_{};
