@@ -139,8 +139,8 @@ def test_tower_of_30_stands_for_6000_steps_with_stiff_contacts():
     # Hz, buckle it, see the xfail below). 8 substeps allow 120 Hz (a quarter of the
     # substep rate). "Stands": after 6000 steps every box is within 5 cm (5% of its
     # size) of where it started and upright within 0.5 degrees. Measured: 3.0 cm at
-    # most (3.1 with the double lane solver), 2.6 of it sideways: the tower sways (next test), so the 1 cm a rigid
-    # tower would allow is not met. The sag follows the springs: 900 g / (2 pi f)^2
+    # most, 2.5 of it sideways (3.1 and 2.6 with the double lane solver): the tower
+    # sways (next test), so the 1 cm a rigid tower would allow is not met. The sag follows the springs: 900 g / (2 pi f)^2
     # = 15.5 mm for this tower (per-point loads over per-point effective masses),
     # within 20%.
     w, p0, _ = _stiff_tower_after((600, 6000))
