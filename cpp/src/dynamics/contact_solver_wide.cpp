@@ -112,7 +112,8 @@ WMO_INLINE void transpose8(v8 (&r)[8]) {
 /// Half `half` (0: v, w; 1: dp, dq) of the 8 rows, transposed: c[j] holds float j of
 /// that half for every lane.
 WMO_INLINE void gather_half(const std::array<int, L>& idx, const Row* rows, int half, v8 (&c)[8]) {
-  for (int l = 0; l < L; ++l) c[l] = ld(reinterpret_cast<const float*>(rows + idx[l]) + 8 * half);
+  // Bytes of the row (its object representation): 32 from the start of the half.
+  for (int l = 0; l < L; ++l) std::memcpy(&c[l], reinterpret_cast<const char*>(rows + idx[l]) + 32 * half, 32);
   transpose8(c);
 }
 
@@ -140,7 +141,7 @@ WMO_INLINE void scatter(const std::array<int, L>& idx, const Bodies& b, Row* row
   const v8 zero = splat(0);
   v8 c[8] = {b.v.x, b.v.y, b.v.z, b.w.x, b.w.y, b.w.z, zero, zero};
   transpose8(c);
-  for (int l = 0; l < L; ++l) st(reinterpret_cast<float*>(rows + idx[l]), c[l]);
+  for (int l = 0; l < L; ++l) std::memcpy(reinterpret_cast<char*>(rows + idx[l]), &c[l], 32);
 }
 
 /// dq * r - r, the anchor's displacement by the rotation since the step began (Eigen's

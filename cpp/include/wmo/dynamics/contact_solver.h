@@ -192,6 +192,7 @@ class WideContacts {
     float v[3], w[3], pad0[2];
     float dp[3], dq[4], pad1;  ///< dq as x, y, z, w
   };
+  static_assert(sizeof(Row) == 64, "the passes move a row as two 32-byte halves");
 
  private:
   void load(const std::vector<BodyState>& states);
