@@ -64,14 +64,19 @@ class EngineRun:
 
 #: Threads WMO steps with (its narrowphase is parallel; peers run single-threaded).
 WMO_THREADS = 1
+#: WMO's contact spring (Hz); None keeps the World's default (30). The 20-layer pyramid
+#: stands to the centimetre at 45 Hz with 8 substeps (tests/python/test_stability.py).
+WMO_CONTACT_HERTZ: float | None = None
 
 
 def run_wmo(spec: _scenes.BoxScene, steps: int, dt: float, iterations: int, substeps: int,
             sleeping: bool) -> EngineRun:
+    extra = {} if WMO_CONTACT_HERTZ is None else {"contact_hertz": WMO_CONTACT_HERTZ}
     world = _scenes.build(spec, dt=dt, substeps=substeps, iterations=1, sleeping=sleeping,
-                          threads=WMO_THREADS)
+                          threads=WMO_THREADS, **extra)
+    hertz = "default contact Hz" if WMO_CONTACT_HERTZ is None else f"{WMO_CONTACT_HERTZ:g} Hz contacts"
     run = EngineRun("wmo", f"wmo {_version()}",
-                    f"dt {dt:g}, {substeps} substeps x 1 iteration + 1 relax, "
+                    f"dt {dt:g}, {substeps} substeps x 1 iteration + 1 relax, {hertz}, "
                     f"sleeping {'on' if sleeping else 'off'}, {WMO_THREADS} thread(s)")
     for k in range(steps):
         t0 = time.perf_counter()
@@ -297,8 +302,9 @@ def measure_memory(scene: str = "boxes3000", steps: int = 600, engines: Iterable
     for name in engines:
         if name not in RUNNERS:
             raise ValueError(f"engine must be one of {list(RUNNERS)}, got {name!r}")
-        code = (f"from wmo import bench; bench._memory_child({scene!r}, {name!r}, {steps}, {dt!r}, "
-                f"{iterations}, {substeps}, {sleeping})")
+        code = (f"from wmo import bench; bench.WMO_THREADS = {WMO_THREADS!r}; "
+                f"bench.WMO_CONTACT_HERTZ = {WMO_CONTACT_HERTZ!r}; "
+                f"bench._memory_child({scene!r}, {name!r}, {steps}, {dt!r}, {iterations}, {substeps}, {sleeping})")
         proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
         if proc.returncode != 0:
             last = (proc.stderr.strip().splitlines() or ["failed"])[-1]

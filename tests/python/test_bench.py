@@ -54,6 +54,25 @@ def test_command_line(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "wmo", "bench", "pyramid", "--dt", "0"],
                          capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "dt" in bad.stderr
+    # The contact spring reaches WMO's World and is named in the settings it prints.
+    stiff = subprocess.run([sys.executable, "-m", "wmo", "bench", "pyramid", "--steps", "1", "--engines", "wmo",
+                            "--substeps", "8", "--contact-hertz", "45", "--out", str(tmp_path)],
+                           capture_output=True, text=True, timeout=300)
+    assert stiff.returncode == 0, stiff.stderr
+    assert "8 substeps" in stiff.stdout and "45 Hz contacts" in stiff.stdout
+    bad = subprocess.run([sys.executable, "-m", "wmo", "bench", "pyramid", "--contact-hertz", "-1"],
+                         capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and "contact-hertz" in bad.stderr
+
+
+def test_contact_hertz_reaches_the_world(monkeypatch):
+    # Through run_wmo's World: a different spring gives a different first step.
+    spec = bench._scenes.SPECS["pyramid"]()
+    default = bench.run_wmo(spec, 2, 1 / 60, 10, 4, False)
+    monkeypatch.setattr(bench, "WMO_CONTACT_HERTZ", 45.0)
+    stiff = bench.run_wmo(spec, 2, 1 / 60, 10, 4, False)
+    assert "45 Hz contacts" in stiff.settings and "default contact Hz" in default.settings
+    assert stiff.records[-1].max_penetration != default.records[-1].max_penetration
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="memory is read from /proc (Linux)")
