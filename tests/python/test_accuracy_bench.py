@@ -34,6 +34,9 @@ def test_accuracy_sweep_quick(tmp_path):
               if r["engine"] == "wmo" and r["case"] == "bounce" and r["knob"] == "speculative_motion"}
     assert set(bounce) == {0.0, 1.0}
     assert bounce[1.0] < 0.04 < bounce[0.0]
+    # The contact spring is a knob too (quick: its first three values).
+    hertz = {float(r["value"]) for r in rows if r["engine"] == "wmo" and r["knob"] == "contact_hertz"}
+    assert hertz == {15.0, 30.0, 45.0}
     assert (tmp_path / "slide_accuracy.png").stat().st_size > 1000
     # The peers share the axes where installed (MuJoCo has no restitution setting, so
     # no bounce), and their sliding box stops near v^2 / (2 mu g) = 5 m too.
