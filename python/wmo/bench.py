@@ -65,7 +65,7 @@ class EngineRun:
 #: Threads WMO steps with (its narrowphase is parallel; peers run single-threaded).
 WMO_THREADS = 1
 #: WMO's contact spring (Hz); None keeps the World's default (30). The 20-layer pyramid
-#: stands to the centimetre at 45 Hz with 8 substeps (tests/python/test_stability.py).
+#: stands to the centimetre at 38 Hz with 6 substeps (tests/python/test_stability.py).
 WMO_CONTACT_HERTZ: float | None = None
 
 

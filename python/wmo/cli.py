@@ -49,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="threads for WMO (default 1; the peers run single-threaded)")
     b.add_argument("--contact-hertz", type=float, default=None,
                    help="WMO's contact spring in Hz (default: the World's, 30); the pyramid stands "
-                        "to the centimetre with --substeps 8 --contact-hertz 45")
+                        "to the centimetre with --substeps 6 --contact-hertz 38")
     b.add_argument("--memory", action="store_true",
                    help="also measure each engine's peak memory, in a fresh process each (Linux)")
     args = ap.parse_args(argv)
