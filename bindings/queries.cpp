@@ -601,6 +601,182 @@ Attributes:
       },
       py::arg("shape"), py::arg("pose"), py::arg("origins"), py::arg("directions"),
       py::arg("max_distance") = kInf);
+
+  // ---- Time of impact ----
+  py::class_<ToiResult>(m, "ToiResult", R"doc(
+Result of time_of_impact (world frame).
+
+Attributes:
+    hit: True if the shapes come within `tolerance` of each other during the interval.
+    time: seconds from the start: the first time found with distance <= tolerance (never
+        later than the true first contact); `duration` on a miss.
+    initially_overlapping: True if the shapes overlap at the start (time 0).
+    distance: at `time` (on a miss: at the last time evaluated), metres; minus the
+        penetration depth when overlapping.
+    point_a, point_b: (3,) closest points on A and on B then.
+    normal: (3,) unit vector from A to B then.
+    status: 'ok'; 'unsupported' (no distance routine for the pair, or a spinning plane);
+        'max_iterations' (the cap stopped the search: hit is True at the last safe time).
+    iterations: distance evaluations made.
+)doc")
+      .def_readonly("hit", &ToiResult::hit)
+      .def_readonly("time", &ToiResult::time)
+      .def_readonly("initially_overlapping", &ToiResult::initially_overlapping)
+      .def_readonly("distance", &ToiResult::distance)
+      .def_property_readonly("point_a", [](const ToiResult& r) { return to_array(r.point_a); })
+      .def_property_readonly("point_b", [](const ToiResult& r) { return to_array(r.point_b); })
+      .def_property_readonly("normal", [](const ToiResult& r) { return to_array(r.normal); })
+      .def_property_readonly("status", [](const ToiResult& r) { return std::string(status_name(r.status)); })
+      .def_readonly("iterations", &ToiResult::iterations)
+      .def("__bool__", [](const ToiResult& r) { return r.hit; })
+      .def("__repr__", [](const ToiResult& r) {
+        return "ToiResult(hit=" + std::string(r.hit ? "True" : "False") + ", time=" + repr_real(r.time) +
+               ", distance=" + repr_real(r.distance) + ", normal=" + repr_vec(r.normal) + ", status='" +
+               status_name(r.status) + "', iterations=" + std::to_string(r.iterations) + ")";
+      });
+
+  g.attr("TOI_TOLERANCE") = ToiSettings{}.tolerance;
+  g.attr("TOI_MAX_ITERATIONS") = ToiSettings{}.max_iterations;
+
+  g.def(
+      "time_of_impact",
+      [](const Shape& a, py::handle pa, const Shape& b, py::handle pb, py::handle va, py::handle wa,
+         py::handle vb, py::handle wb, py::handle ca, py::handle cb, Real duration, Real tolerance,
+         int max_iterations, Real gjk_tol, int gjk_iter) {
+        auto motion = [](py::handle pose, py::handle v, py::handle w, py::handle c, const char* side) {
+          const std::string s(side);
+          Motion mo;
+          mo.start = to_pose(pose, "pose_" + s);
+          mo.linear_velocity = to_vec3(v, "velocity_" + s);
+          mo.angular_velocity = to_vec3(w, "angular_velocity_" + s);
+          mo.center = to_vec3(c, "center_" + s);
+          require_finite(("velocity_" + s).c_str(), mo.linear_velocity);
+          require_finite(("angular_velocity_" + s).c_str(), mo.angular_velocity);
+          require_finite(("center_" + s).c_str(), mo.center);
+          return mo;
+        };
+        const Motion ma = motion(pa, va, wa, ca, "a");
+        const Motion mb = motion(pb, vb, wb, cb, "b");
+        ToiSettings st;
+        st.tolerance = tolerance;
+        st.max_iterations = max_iterations;
+        st.gjk = make_gjk(gjk_tol, gjk_iter);
+        return time_of_impact(a, ma, b, mb, duration, st);
+      },
+      py::arg("a"), py::arg("pose_a"), py::arg("b"), py::arg("pose_b"), py::kw_only(),
+      py::arg("velocity_a"), py::arg("angular_velocity_a"), py::arg("velocity_b"),
+      py::arg("angular_velocity_b"), py::arg("center_a"), py::arg("center_b"), py::arg("duration"),
+      py::arg("tolerance"), py::arg("max_iterations"), py::arg("gjk_tolerance") = kGjk.tolerance,
+      py::arg("gjk_max_iterations") = kGjk.max_iterations);
+
+  g.def(
+      "time_of_impact_batch",
+      [](const Shape& a, const Shape& b, py::handle poses_a, py::handle poses_b, py::handle va,
+         py::handle wa, py::handle vb, py::handle wb, Real duration, Real tolerance, int max_iterations,
+         Real gjk_tol, int gjk_iter) {
+        // Every shape first (TypeError), then every value (ValueError naming the row).
+        const PairPoses poses = to_pair_poses(poses_a, poses_b);
+        struct Rows {
+          RealArray arr;
+          bool one = false;
+          const char* field;
+        };
+        auto parse = [](py::handle obj, const char* field) {
+          Rows r{to_real_array(obj, field, "(N, 3) or (3,)"), false, field};
+          r.one = r.arr.ndim() == 1 && r.arr.shape(0) == 3;
+          if (!r.one && !(r.arr.ndim() == 2 && r.arr.shape(1) == 3))
+            throw_shape_error(field, "(N, 3) or (3,)", r.arr);
+          return r;
+        };
+        Rows rows[4] = {parse(va, "velocities_a"), parse(wa, "angular_velocities_a"),
+                        parse(vb, "velocities_b"), parse(wb, "angular_velocities_b")};
+        // N from the array arguments; (7,) poses and (3,) rows broadcast.
+        py::ssize_t n = poses.a.broadcast && poses.b.broadcast ? -1 : poses.n;
+        const char* n_from = poses.a.broadcast ? "poses_b" : "poses_a";
+        for (const Rows& r : rows) {
+          if (r.one) continue;
+          if (n < 0) {
+            n = r.arr.shape(0);
+            n_from = r.field;
+          } else if (r.arr.shape(0) != n) {
+            throw py::type_error(std::string(r.field) + " must have shape (" + std::to_string(n) +
+                                 ", 3) or (3,) to match " + n_from + ", got (" +
+                                 std::to_string(r.arr.shape(0)) + ", 3)");
+          }
+        }
+        if (n < 0) n = 1;
+        auto row = [](const Rows& r, py::ssize_t i) {
+          const double* p = r.arr.data() + (r.one ? 0 : 3 * i);
+          return Vec3(p[0], p[1], p[2]);
+        };
+        for (const Rows& r : rows)
+          for (py::ssize_t i = 0; i < (r.one ? 1 : n); ++i)
+            if (!row(r, i).allFinite())
+              throw InvalidArgument(row_name(r.field, r.one, i) + " must be finite, got " +
+                                    to_string(row(r, i)));
+        if (!(duration >= 0) || !std::isfinite(duration))
+          throw InvalidArgument("duration must be finite and >= 0, got " + repr_real(duration));
+        ToiSettings st;
+        st.tolerance = tolerance;
+        st.max_iterations = max_iterations;
+        st.gjk = make_gjk(gjk_tol, gjk_iter);
+        if (!(tolerance > 0) || !std::isfinite(tolerance))
+          throw InvalidArgument("tolerance must be finite and > 0, got " + repr_real(tolerance));
+        if (max_iterations < 1)
+          throw InvalidArgument("max_iterations must be >= 1, got " + std::to_string(max_iterations));
+        py::array_t<bool> hit(n), overlapping(n);
+        py::array_t<double> time(n), distance(n), point_a = vec_array(n), point_b = vec_array(n),
+            normal = vec_array(n);
+        py::array_t<std::uint8_t> status(n);
+        py::array_t<std::int32_t> iterations(n);
+        bool* h = data_of(hit);
+        bool* ov = data_of(overlapping);
+        double* tm = data_of(time);
+        double* d = data_of(distance);
+        double* qa = data_of(point_a);
+        double* qb = data_of(point_b);
+        double* nr = data_of(normal);
+        std::uint8_t* stt = data_of(status);
+        std::int32_t* it = data_of(iterations);
+        {
+          py::gil_scoped_release release;
+          for (py::ssize_t i = 0; i < n; ++i) {
+            Motion ma, mb;
+            ma.start = poses.a[poses.a.broadcast ? 0 : i];
+            mb.start = poses.b[poses.b.broadcast ? 0 : i];
+            ma.linear_velocity = row(rows[0], i);
+            ma.angular_velocity = row(rows[1], i);
+            mb.linear_velocity = row(rows[2], i);
+            mb.angular_velocity = row(rows[3], i);
+            const ToiResult r = time_of_impact(a, ma, b, mb, duration, st);
+            h[i] = r.hit;
+            ov[i] = r.initially_overlapping;
+            tm[i] = r.time;
+            d[i] = r.distance;
+            put(qa + 3 * i, r.point_a);
+            put(qb + 3 * i, r.point_b);
+            put(nr + 3 * i, r.normal);
+            stt[i] = static_cast<std::uint8_t>(r.status);
+            it[i] = r.iterations;
+          }
+        }
+        py::dict out;
+        out["hit"] = hit;
+        out["time"] = time;
+        out["initially_overlapping"] = overlapping;
+        out["distance"] = distance;
+        out["point_a"] = point_a;
+        out["point_b"] = point_b;
+        out["normal"] = normal;
+        out["status"] = status;
+        out["iterations"] = iterations;
+        return out;
+      },
+      py::arg("a"), py::arg("b"), py::arg("poses_a"), py::arg("poses_b"), py::kw_only(),
+      py::arg("velocities_a"), py::arg("angular_velocities_a"), py::arg("velocities_b"),
+      py::arg("angular_velocities_b"), py::arg("duration"), py::arg("tolerance"),
+      py::arg("max_iterations"), py::arg("gjk_tolerance") = kGjk.tolerance,
+      py::arg("gjk_max_iterations") = kGjk.max_iterations);
 }
 
 }  // namespace wmo::bindings

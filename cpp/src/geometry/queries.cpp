@@ -280,4 +280,106 @@ RayHit raycast(const Shape& shape, const Pose& pose, const Vec3& origin, const V
   return h;
 }
 
+Pose Motion::at(Real t) const {
+  const Real w = angular_velocity.norm();
+  Pose p;
+  p.rotation = w > 0 ? Quat(Eigen::AngleAxis<Real>(w * t, angular_velocity / w)) * start.rotation
+                     : start.rotation;
+  p.rotation.normalize();
+  p.position = start.transform_point(center) + t * linear_velocity - p.rotation * center;
+  return p;
+}
+
+namespace {
+
+// Largest distance of `shape`'s core from its local point c: from the corners of the
+// core's bounding box (the shape's box shrunk by its convex radius, which is exact for
+// core plus radius shapes: a sphere's core is its centre). An upper bound, which is
+// what conservative advancement needs. Infinite for a plane.
+Real rotation_bound(const Shape& shape, const Vec3& c) {
+  if (shape.type() == ShapeType::kPlane) return kInf;
+  Aabb box = shape.local_aabb();
+  if (shape.is_convex()) {
+    const Real r = static_cast<const ConvexShape&>(shape).radius();
+    box.min.array() += r;
+    box.max.array() -= r;
+  }
+  const Vec3 far = (box.min - c).cwiseAbs().cwiseMax((box.max - c).cwiseAbs());
+  return far.norm();
+}
+
+void check_motion(const char* field, const Motion& m) {
+  check_pose(field, m.start);
+  if (!m.linear_velocity.allFinite() || !m.angular_velocity.allFinite() || !m.center.allFinite())
+    throw InvalidArgument(std::string(field) + " velocities and centre must be finite, got linear " +
+                          to_string(m.linear_velocity) + ", angular " + to_string(m.angular_velocity));
+}
+
+}  // namespace
+
+ToiResult time_of_impact(const Shape& a, const Motion& motion_a, const Shape& b, const Motion& motion_b,
+                         Real duration, const ToiSettings& settings) {
+  check_motion("motion_a", motion_a);
+  check_motion("motion_b", motion_b);
+  if (!(duration >= 0) || !std::isfinite(duration))
+    throw InvalidArgument("duration must be finite and >= 0, got " + std::to_string(duration));
+  if (!(settings.tolerance > 0) || !std::isfinite(settings.tolerance))
+    throw InvalidArgument("tolerance must be finite and > 0, got " + std::to_string(settings.tolerance));
+  if (settings.max_iterations < 1)
+    throw InvalidArgument("max_iterations must be >= 1, got " + std::to_string(settings.max_iterations));
+
+  ToiResult res;
+  const Real wa = motion_a.angular_velocity.norm(), wb = motion_b.angular_velocity.norm();
+  // A shape that does not turn needs no rotation bound (a plane may translate).
+  const Real spin = (wa > 0 ? wa * rotation_bound(a, motion_a.center) : 0) +
+                    (wb > 0 ? wb * rotation_bound(b, motion_b.center) : 0);
+  if (!std::isfinite(spin)) {
+    res.status = QueryStatus::kUnsupported;
+    return res;
+  }
+  const Vec3 dv = motion_a.linear_velocity - motion_b.linear_velocity;
+  const Real tol = settings.tolerance;
+  const Real target = 0.5 * tol;
+  Real t = 0;
+  for (int it = 0;; ++it) {
+    const Pose pa = motion_a.at(t), pb = motion_b.at(t);
+    DistanceResult d = pair_query(Mode::kDistance, a, pa, b, pb, settings.gjk, EpaSettings{});
+    res.iterations = it + 1;
+    if (d.status == QueryStatus::kUnsupported) {
+      res.status = d.status;
+      return res;
+    }
+    res.time = t;
+    if (d.intersecting) {
+      // Overlapping (at the start, or within GJK's round-off of touching): report the
+      // signed distance and the penetration normal.
+      d = pair_query(Mode::kSigned, a, pa, b, pb, settings.gjk, EpaSettings{});
+      res.initially_overlapping = it == 0 && d.distance < 0;
+    }
+    res.distance = d.distance;
+    res.point_a = d.point_a;
+    res.point_b = d.point_b;
+    res.normal = d.normal;
+    if (d.intersecting || d.distance <= tol) {
+      res.hit = true;
+      return res;
+    }
+    // Largest rate at which the slab between the shapes can close.
+    const Real closing = dv.dot(d.normal) + spin;
+    if (!(closing > 0)) break;  // the slab never closes: no contact in the interval
+    const Real next = t + (d.distance - target) / closing;
+    if (!(next <= duration)) break;
+    if (it + 1 >= settings.max_iterations) {
+      // Stopped short of the end: `t` is still a time before any contact.
+      res.hit = true;
+      res.status = QueryStatus::kMaxIterations;
+      return res;
+    }
+    t = next;
+  }
+  res.hit = false;
+  res.time = duration;
+  return res;
+}
+
 }  // namespace wmo
