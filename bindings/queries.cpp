@@ -58,6 +58,30 @@ CollideSettings make_collide(Real margin, bool special, Real gjk_tol, int gjk_it
   return s;
 }
 
+/// An (N, 3) array, or one (3,) row shared by every query (`one` = true); TypeError
+/// naming `field` otherwise.
+RealArray vec3_rows(py::handle obj, const char* field, bool& one) {
+  RealArray arr = to_real_array(obj, field, "(N, 3) or (3,)");
+  one = arr.ndim() == 1 && arr.shape(0) == 3;
+  if (!one && !(arr.ndim() == 2 && arr.shape(1) == 3)) throw_shape_error(field, "(N, 3) or (3,)", arr);
+  return arr;
+}
+
+/// Validated time-of-impact settings (ValueError naming the field), and the duration.
+ToiSettings make_toi(Real duration, Real tolerance, int max_iterations, Real gjk_tol, int gjk_iter) {
+  if (!(duration >= 0) || !std::isfinite(duration))
+    throw InvalidArgument("duration must be finite and >= 0, got " + repr_real(duration));
+  if (!(tolerance > 0) || !std::isfinite(tolerance))
+    throw InvalidArgument("tolerance must be finite and > 0, got " + repr_real(tolerance));
+  if (max_iterations < 1)
+    throw InvalidArgument("max_iterations must be >= 1, got " + std::to_string(max_iterations));
+  ToiSettings st;
+  st.tolerance = tolerance;
+  st.max_iterations = max_iterations;
+  st.gjk = make_gjk(gjk_tol, gjk_iter);
+  return st;
+}
+
 void check_max_distance(Real max_distance) {
   if (std::isnan(max_distance) || max_distance < 0)
     throw InvalidArgument("max_distance must be >= 0 (inf allowed), got " + repr_real(max_distance));
@@ -537,16 +561,9 @@ Attributes:
          Real max_distance) {
         // Shapes first (TypeError), then values (ValueError).
         // (N, 3) or (3,) (one origin / direction for every ray).
-        auto parse = [](py::handle obj, const char* field, bool& one) {
-          RealArray arr = to_real_array(obj, field, "(N, 3) or (3,)");
-          one = arr.ndim() == 1 && arr.shape(0) == 3;
-          if (!one && !(arr.ndim() == 2 && arr.shape(1) == 3))
-            throw_shape_error(field, "(N, 3) or (3,)", arr);
-          return arr;
-        };
         bool one_o = false, one_d = false;
-        RealArray o_arr = parse(origins, "origins", one_o);
-        RealArray d_arr = parse(directions, "directions", one_d);
+        RealArray o_arr = vec3_rows(origins, "origins", one_o);
+        RealArray d_arr = vec3_rows(directions, "directions", one_d);
         const py::ssize_t no = one_o ? 1 : o_arr.shape(0), nd = one_d ? 1 : d_arr.shape(0);
         if (!one_o && !one_d && no != nd)
           throw py::type_error("directions must have shape (" + std::to_string(no) +
@@ -657,11 +674,8 @@ Attributes:
         };
         const Motion ma = motion(pa, va, wa, ca, "a");
         const Motion mb = motion(pb, vb, wb, cb, "b");
-        ToiSettings st;
-        st.tolerance = tolerance;
-        st.max_iterations = max_iterations;
-        st.gjk = make_gjk(gjk_tol, gjk_iter);
-        return time_of_impact(a, ma, b, mb, duration, st);
+        return time_of_impact(a, ma, b, mb, duration,
+                              make_toi(duration, tolerance, max_iterations, gjk_tol, gjk_iter));
       },
       py::arg("a"), py::arg("pose_a"), py::arg("b"), py::arg("pose_b"), py::kw_only(),
       py::arg("velocity_a"), py::arg("angular_velocity_a"), py::arg("velocity_b"),
@@ -682,10 +696,8 @@ Attributes:
           const char* field;
         };
         auto parse = [](py::handle obj, const char* field) {
-          Rows r{to_real_array(obj, field, "(N, 3) or (3,)"), false, field};
-          r.one = r.arr.ndim() == 1 && r.arr.shape(0) == 3;
-          if (!r.one && !(r.arr.ndim() == 2 && r.arr.shape(1) == 3))
-            throw_shape_error(field, "(N, 3) or (3,)", r.arr);
+          Rows r{RealArray(), false, field};
+          r.arr = vec3_rows(obj, field, r.one);
           return r;
         };
         Rows rows[4] = {parse(va, "velocities_a"), parse(wa, "angular_velocities_a"),
@@ -714,16 +726,7 @@ Attributes:
             if (!row(r, i).allFinite())
               throw InvalidArgument(row_name(r.field, r.one, i) + " must be finite, got " +
                                     to_string(row(r, i)));
-        if (!(duration >= 0) || !std::isfinite(duration))
-          throw InvalidArgument("duration must be finite and >= 0, got " + repr_real(duration));
-        ToiSettings st;
-        st.tolerance = tolerance;
-        st.max_iterations = max_iterations;
-        st.gjk = make_gjk(gjk_tol, gjk_iter);
-        if (!(tolerance > 0) || !std::isfinite(tolerance))
-          throw InvalidArgument("tolerance must be finite and > 0, got " + repr_real(tolerance));
-        if (max_iterations < 1)
-          throw InvalidArgument("max_iterations must be >= 1, got " + std::to_string(max_iterations));
+        const ToiSettings st = make_toi(duration, tolerance, max_iterations, gjk_tol, gjk_iter);
         py::array_t<bool> hit(n), overlapping(n);
         py::array_t<double> time(n), distance(n), point_a = vec_array(n), point_b = vec_array(n),
             normal = vec_array(n);
