@@ -659,7 +659,7 @@ Attributes:
       "time_of_impact",
       [](const Shape& a, py::handle pa, const Shape& b, py::handle pb, py::handle va, py::handle wa,
          py::handle vb, py::handle wb, py::handle ca, py::handle cb, Real duration, Real tolerance,
-         int max_iterations, Real gjk_tol, int gjk_iter) {
+         Real target_distance, int max_iterations, Real gjk_tol, int gjk_iter) {
         auto motion = [](py::handle pose, py::handle v, py::handle w, py::handle c, const char* side) {
           const std::string s(side);
           Motion mo;
@@ -674,13 +674,17 @@ Attributes:
         };
         const Motion ma = motion(pa, va, wa, ca, "a");
         const Motion mb = motion(pb, vb, wb, cb, "b");
-        return time_of_impact(a, ma, b, mb, duration,
-                              make_toi(duration, tolerance, max_iterations, gjk_tol, gjk_iter));
+        ToiSettings st = make_toi(duration, tolerance, max_iterations, gjk_tol, gjk_iter);
+        if (!std::isfinite(target_distance))
+          throw InvalidArgument("target_distance must be finite, got " + repr_real(target_distance));
+        st.target_distance = target_distance;
+        return time_of_impact(a, ma, b, mb, duration, st);
       },
       py::arg("a"), py::arg("pose_a"), py::arg("b"), py::arg("pose_b"), py::kw_only(),
       py::arg("velocity_a"), py::arg("angular_velocity_a"), py::arg("velocity_b"),
       py::arg("angular_velocity_b"), py::arg("center_a"), py::arg("center_b"), py::arg("duration"),
-      py::arg("tolerance"), py::arg("max_iterations"), py::arg("gjk_tolerance") = kGjk.tolerance,
+      py::arg("tolerance"), py::arg("target_distance") = 0.0, py::arg("max_iterations"),
+      py::arg("gjk_tolerance") = kGjk.tolerance,
       py::arg("gjk_max_iterations") = kGjk.max_iterations);
 
   g.def(

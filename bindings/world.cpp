@@ -107,6 +107,15 @@ the world's state arrays (it changes when another body is removed).
             world_of(b).set_angular_velocity(b.id, to_vec3(w, "angular_velocity"));
           },
           "Angular velocity (rad/s, world); a copy. Setting it validates the value.")
+      .def_property(
+          "ccd",
+          [](const PyBody& b) {
+            World& w = world_of(b);
+            return w.ccd(w.index_of(b.id));
+          },
+          [](const PyBody& b, bool on) { world_of(b).set_ccd(b.id, on); },
+          "Continuous collision detection for this body (dynamic bodies only; the World's "
+          "``ccd`` switch must be on too): it never passes through anything.")
       .def_property_readonly(
           "sleeping",
           [](const PyBody& b) {
@@ -167,6 +176,21 @@ sleeping : put resting islands to sleep (default True): an island whose bodies a
     until an awake or moving body overlaps it, a force, impulse or setter reaches one of
     its bodies, its velocities or pose are written in the state arrays, or one of its
     bodies is removed.
+ccd : the world switch for continuous collision detection (default True); each body
+    asks for it with ``add_body(..., ccd=True)`` (off by default), and only those pay.
+    Two halves: a CCD body's pairs get speculative contacts covering their relative
+    translation in the step (the solver stops it at the surface it approaches), and
+    after the solve each fast CCD body is swept from its start to its end pose,
+    rotation included, against everything near its path (time of impact, conservative
+    advancement); one that would overlap something by more than its allowance is put
+    back at that time, its velocity kept but for the potential energy the move back
+    gains, so CCD never adds energy. Two fast CCD bodies are swept against each other,
+    both moving. The ``ccd`` stage of ``profile`` counts the bodies swept.
+ccd_motion_threshold : a CCD body is swept only in steps where its points move more
+    than this fraction of its inner radius (half-thickness; default 0.5): slower
+    bodies take the ordinary path. 0 sweeps every CCD body every step.
+ccd_penetration : how far a swept body may overlap another before it is put back, as a
+    fraction of its inner radius (default 0.05).
 
 State arrays (world.positions, orientations, linear_velocities, angular_velocities)
 are zero-copy, writable views; see the module notes on their lifetime.
@@ -178,7 +202,7 @@ are zero-copy, writable views; see the module notes on their lifetime.
                        const std::string& friction_combine,
                        const std::string& restitution_combine, bool gyroscopic, bool sleeping,
                        double sleep_linear_threshold, double sleep_angular_threshold, double time_to_sleep,
-                       int threads) {
+                       int threads, bool ccd, double ccd_motion_threshold, double ccd_penetration) {
              WorldSettings s;
              s.gravity = gravity.is_none() ? Vec3(0, -9.81, 0) : to_vec3(gravity, "gravity");
              s.dt = dt;
@@ -201,6 +225,9 @@ are zero-copy, writable views; see the module notes on their lifetime.
              s.sleep_angular_threshold = sleep_angular_threshold;
              s.time_to_sleep = time_to_sleep;
              s.threads = threads;
+             s.enable_ccd = ccd;
+             s.ccd_motion_threshold = ccd_motion_threshold;
+             s.ccd_penetration = ccd_penetration;
              return std::make_unique<World>(s);
            }),
            py::arg("gravity") = py::none(), py::arg("dt") = 1.0 / 60, py::arg("substeps") = 4,
@@ -212,13 +239,14 @@ are zero-copy, writable views; see the module notes on their lifetime.
            py::arg("friction_combine") = "multiply", py::arg("restitution_combine") = "max",
            py::arg("gyroscopic") = false, py::arg("sleeping") = true, py::arg("sleep_linear_threshold") = 0.05,
            py::arg("sleep_angular_threshold") = 2 * kPi / 180, py::arg("time_to_sleep") = 0.5,
-           py::arg("threads") = 1)
+           py::arg("threads") = 1, py::arg("ccd") = true, py::arg("ccd_motion_threshold") = 0.5,
+           py::arg("ccd_penetration") = 0.05)
       .def(
           "add_body",
           [](py::object self, std::shared_ptr<Shape> shape, py::object position, py::object orientation,
              const std::string& kind, py::object mass, double density, double friction, double restitution,
              py::object linear_velocity, py::object angular_velocity, double linear_damping, double angular_damping,
-             double gravity_scale) {
+             double gravity_scale, bool ccd) {
             World& w = self.cast<World&>();
             BodyDef d;
             d.shape = std::move(shape);
@@ -234,18 +262,20 @@ are zero-copy, writable views; see the module notes on their lifetime.
             d.linear_damping = linear_damping;
             d.angular_damping = angular_damping;
             d.gravity_scale = gravity_scale;
+            d.ccd = ccd;
             return PyBody{self, w.add_body(d)};
           },
           py::arg("shape"), py::arg("position") = py::none(), py::arg("orientation") = py::none(),
           py::arg("kind") = "dynamic", py::arg("mass") = py::none(), py::arg("density") = 1000.0,
           py::arg("friction") = 0.5, py::arg("restitution") = 0.0, py::arg("linear_velocity") = py::none(),
           py::arg("angular_velocity") = py::none(), py::arg("linear_damping") = 0.0, py::arg("angular_damping") = 0.0,
-          py::arg("gravity_scale") = 1.0, R"doc(
+          py::arg("gravity_scale") = 1.0, py::arg("ccd") = false, R"doc(
 Adds a body and returns its Body handle. ``kind`` is 'dynamic' (default), 'static' or
 'kinematic'. ``mass`` (kg) overrides ``density`` (kg/m^3); the inertia follows the shape.
 Position (m) and orientation (x, y, z, w) place the shape's frame; velocities are of
-the centre of mass (m/s, rad/s, world frame). Bad values raise ValueError naming the
-field; the world is unchanged. Existing state views may detach (see World).
+the centre of mass (m/s, rad/s, world frame). ``ccd=True`` turns on continuous
+collision detection for a dynamic body (see World). Bad values raise ValueError naming
+the field; the world is unchanged. Existing state views may detach (see World).
 )doc")
       .def(
           "remove_body",
@@ -288,6 +318,10 @@ field; the world is unchanged. Existing state views may detach (see World).
       .def_property_readonly("sleeping", [](const World& w) { return w.settings().enable_sleep; },
                              "Whether resting islands are put to sleep.")
       .def_property_readonly("awake_count", &World::awake_dynamic_count, "Number of awake dynamic bodies.")
+      .def_property_readonly("ccd", [](const World& w) { return w.settings().enable_ccd; },
+                             "The continuous collision detection switch (see World).")
+      .def_property_readonly("ccd_hits", &World::ccd_hit_count,
+                             "Bodies the last step's ccd stage put back at a time of impact.")
       .def_property_readonly(
           "awake",
           [](const World& w) {

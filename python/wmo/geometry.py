@@ -274,8 +274,9 @@ def time_of_impact(a: Shape, pose_a: PoseLike, b: Shape, pose_b: PoseLike, *,
                    velocity_b: npt.ArrayLike = _ZERO3, angular_velocity_b: npt.ArrayLike = _ZERO3,
                    center_a: npt.ArrayLike = _ZERO3, center_b: npt.ArrayLike = _ZERO3,
                    duration: float = 1.0, tolerance: float = _TOI_TOL,
-                   max_iterations: int = _TOI_ITER, gjk_tolerance: float = _GJK_TOL,
-                   gjk_max_iterations: int = _GJK_ITER) -> ToiResult:
+                   target_distance: float = 0.0, max_iterations: int = _TOI_ITER,
+                   gjk_tolerance: float = _GJK_TOL, gjk_max_iterations: int = _GJK_ITER
+                   ) -> ToiResult:
     """First time (seconds, within ``[0, duration]``) at which A and B touch while moving.
 
     Each shape starts at its pose and moves with constant velocities (world frame):
@@ -291,6 +292,12 @@ def time_of_impact(a: Shape, pose_a: PoseLike, b: Shape, pose_b: PoseLike, *,
     Status ``"max_iterations"`` means the cap stopped the search; ``hit`` is then True
     at the last time known to be safe.
 
+    ``target_distance`` (m, signed, default 0) moves what counts as contact: the search
+    stops within ``tolerance`` above it, so -0.01 finds when the shapes first overlap by
+    1 cm (measured with EPA), 0.01 when they first come within 1 cm. Compounds are
+    searched child by child and triangle meshes triangle by triangle, so a far part that
+    closes fast is not hidden behind a near one that closes slowly.
+
     Example::
 
         ball, plate = wmo.Sphere(0.05), wmo.Box((1, 0.005, 1))
@@ -302,6 +309,7 @@ def time_of_impact(a: Shape, pose_a: PoseLike, b: Shape, pose_b: PoseLike, *,
                              angular_velocity_a=angular_velocity_a, velocity_b=velocity_b,
                              angular_velocity_b=angular_velocity_b, center_a=center_a,
                              center_b=center_b, duration=duration, tolerance=tolerance,
+                             target_distance=target_distance,
                              max_iterations=max_iterations, gjk_tolerance=gjk_tolerance,
                              gjk_max_iterations=gjk_max_iterations)
 

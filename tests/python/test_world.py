@@ -190,8 +190,9 @@ def test_contacts_and_profile():
     assert c["normal_impulse"].sum() * 4 == pytest.approx(2.0 * 10 / 60, rel=1e-3)
     prof = world.profile
     assert list(prof) == ["update_broadphase", "find_pairs", "narrowphase", "solve",
-                          "restitution", "store_impulses", "update_sleep"]
+                          "restitution", "store_impulses", "ccd", "update_sleep"]
     assert prof["update_sleep"]["runs"] == 0  # sleeping off: the stage never ran
+    assert prof["ccd"]["runs"] == 0  # no body asks for CCD: the stage never ran
     assert prof["solve"]["count"] == m
     assert prof["restitution"]["runs"] == 0  # nothing bounces: the stage never ran
     assert all(v["seconds"] >= 0 and v["total_seconds"] >= v["seconds"] for v in prof.values())

@@ -315,59 +315,36 @@ void check_motion(const char* field, const Motion& m) {
                           to_string(m.linear_velocity) + ", angular " + to_string(m.angular_velocity));
 }
 
-}  // namespace
-
-ToiResult time_of_impact(const Shape& a, const Motion& motion_a, const Shape& b, const Motion& motion_b,
-                         Real duration, const ToiSettings& settings) {
-  check_motion("motion_a", motion_a);
-  check_motion("motion_b", motion_b);
-  if (!(duration >= 0) || !std::isfinite(duration))
-    throw InvalidArgument("duration must be finite and >= 0, got " + std::to_string(duration));
-  if (!(settings.tolerance > 0) || !std::isfinite(settings.tolerance))
-    throw InvalidArgument("tolerance must be finite and > 0, got " + std::to_string(settings.tolerance));
-  if (settings.max_iterations < 1)
-    throw InvalidArgument("max_iterations must be >= 1, got " + std::to_string(settings.max_iterations));
-
+// Conservative advancement on one convex pair (or convex against plane). `dist(t)`
+// gives the pair's signed distance at time t (normal from A to B); `dv` is v_a - v_b
+// and `spin` |w_a| r_a + |w_b| r_b.
+template <class DistFn>
+ToiResult advance(DistFn&& dist, const Vec3& dv, Real spin, Real duration, const ToiSettings& settings) {
   ToiResult res;
-  const Real wa = motion_a.angular_velocity.norm(), wb = motion_b.angular_velocity.norm();
-  // A shape that does not turn needs no rotation bound (a plane may translate).
-  const Real spin = (wa > 0 ? wa * rotation_bound(a, motion_a.center) : 0) +
-                    (wb > 0 ? wb * rotation_bound(b, motion_b.center) : 0);
-  if (!std::isfinite(spin)) {
-    res.status = QueryStatus::kUnsupported;
-    return res;
-  }
-  const Vec3 dv = motion_a.linear_velocity - motion_b.linear_velocity;
   const Real tol = settings.tolerance;
-  const Real target = 0.5 * tol;
+  const Real target = settings.target_distance;
   Real t = 0;
   for (int it = 0;; ++it) {
-    const Pose pa = motion_a.at(t), pb = motion_b.at(t);
-    DistanceResult d = pair_query(Mode::kDistance, a, pa, b, pb, settings.gjk, EpaSettings{});
+    const DistanceResult d = dist(t);
     res.iterations = it + 1;
     if (d.status == QueryStatus::kUnsupported) {
       res.status = d.status;
       return res;
     }
     res.time = t;
-    if (d.intersecting) {
-      // Overlapping (at the start, or within GJK's round-off of touching): report the
-      // signed distance and the penetration normal.
-      d = pair_query(Mode::kSigned, a, pa, b, pb, settings.gjk, EpaSettings{});
-      res.initially_overlapping = it == 0 && d.distance < 0;
-    }
+    res.initially_overlapping = it == 0 && d.distance < 0;
     res.distance = d.distance;
     res.point_a = d.point_a;
     res.point_b = d.point_b;
     res.normal = d.normal;
-    if (d.intersecting || d.distance <= tol) {
+    if (d.distance <= target + tol) {
       res.hit = true;
       return res;
     }
     // Largest rate at which the slab between the shapes can close.
     const Real closing = dv.dot(d.normal) + spin;
     if (!(closing > 0)) break;  // the slab never closes: no contact in the interval
-    const Real next = t + (d.distance - target) / closing;
+    const Real next = t + (d.distance - target - 0.5 * tol) / closing;
     if (!(next <= duration)) break;
     if (it + 1 >= settings.max_iterations) {
       // Stopped short of the end: `t` is still a time before any contact.
@@ -380,6 +357,212 @@ ToiResult time_of_impact(const Shape& a, const Motion& motion_a, const Shape& b,
   res.hit = false;
   res.time = duration;
   return res;
+}
+
+// The earlier of two answers (a hit beats a miss; between misses the closer one is
+// kept, as the report of how near the shapes came). Evaluations add up.
+void keep_earliest(ToiResult& best, bool& any, const ToiResult& r) {
+  const int iterations = best.iterations + r.iterations;
+  if (!any || (r.hit && (!best.hit || r.time < best.time)) ||
+      (!r.hit && !best.hit && r.distance < best.distance))
+    best = r;
+  best.iterations = any ? iterations : r.iterations;
+  any = true;
+}
+
+// Points the shape can reach during [0, duration] under motion m, as a world box:
+// the boxes at both ends when it does not turn, else the box of the ball that holds it
+// (bounding_radius about the rotation centre) swept along the centre's path.
+Aabb swept_box(const Shape& s, const Motion& m, Real duration) {
+  const Pose end = m.at(duration);
+  if (m.angular_velocity.isZero(0)) {
+    return Aabb::merge(s.world_aabb(m.start), s.world_aabb(end));
+  }
+  const Real r = bounding_radius(s, m.center);
+  const Vec3 c0 = m.start.transform_point(m.center);
+  const Vec3 c1 = c0 + duration * m.linear_velocity;
+  return Aabb(c0.cwiseMin(c1).array() - r, c0.cwiseMax(c1).array() + r);
+}
+
+ToiResult toi_pair(const Shape& a, const Motion& ma, const Shape& b, const Motion& mb, Real duration,
+                   const ToiSettings& st);
+
+// A result with A and B exchanged.
+ToiResult mirrored(ToiResult r) {
+  std::swap(r.point_a, r.point_b);
+  r.normal = -r.normal;
+  return r;
+}
+
+// Compound C (as A) against any shape O: child by child, each child moving with the
+// compound (same velocities, the rotation centre expressed in the child's frame).
+ToiResult toi_compound(const Compound& c, const Motion& mc, const Shape& o, const Motion& mo, Real duration,
+                       const ToiSettings& st) {
+  ToiResult best;
+  bool any = false;
+  const Aabb o_box = swept_box(o, mo, duration);
+  for (const Compound::Child& child : c.children()) {
+    Motion m = mc;
+    m.start = mc.start * child.pose;
+    m.center = child.pose.inverse_transform_point(mc.center);
+    if (!swept_box(*child.shape, m, duration).overlaps(o_box)) continue;
+    const ToiResult r = toi_pair(*child.shape, m, o, mo, duration, st);
+    if (r.status == QueryStatus::kUnsupported) return r;
+    keep_earliest(best, any, r);
+  }
+  if (!any) {  // no child's swept box meets the other's: no contact
+    best.time = duration;
+    best.iterations = 0;
+  }
+  return best;
+}
+
+// Triangle mesh M (as A) against convex B: triangle by triangle, for the triangles the
+// BVH finds in B's swept box (in the mesh frame).
+ToiResult toi_mesh(const TriangleMesh& mesh, const Motion& mm, const ConvexShape& b, const Motion& mb,
+                   Real duration, const ToiSettings& st) {
+  Aabb query;
+  if (mm.angular_velocity.isZero(0)) {
+    // B's swept box relative to the translating mesh, then in the mesh's frame.
+    Aabb box = swept_box(b, mb, duration);
+    const Vec3 back = -duration * mm.linear_velocity;
+    box.min += back.cwiseMin(Vec3::Zero());
+    box.max += back.cwiseMax(Vec3::Zero());
+    query = box.transformed(mm.start.inverse());
+  } else {
+    // A turning mesh: every point of B stays within this distance of the mesh's
+    // rotation centre.
+    const Vec3 cm = mm.start.transform_point(mm.center);
+    const Vec3 cb = mb.start.transform_point(mb.center);
+    const Real r = (cb - cm).norm() + duration * (mb.linear_velocity - mm.linear_velocity).norm() +
+                   bounding_radius(b, mb.center);
+    query = Aabb(mm.center.array() - r, mm.center.array() + r);
+  }
+  const Real wm = mm.angular_velocity.norm(), wb = mb.angular_velocity.norm();
+  const Real spin_b = wb > 0 ? wb * rotation_bound(b, mb.center) : 0;
+  const Vec3 dv = mm.linear_velocity - mb.linear_velocity;
+  const auto& v = mesh.vertices();
+  ToiResult best;
+  bool any = false;
+  bool unsupported_pair = false;
+  mesh.bvh().query_aabb(query, [&](int t) {
+    const auto& tri = mesh.triangles()[t];
+    Real spin = spin_b;
+    if (wm > 0)
+      spin += wm * std::max({(v[tri[0]] - mm.center).norm(), (v[tri[1]] - mm.center).norm(),
+                             (v[tri[2]] - mm.center).norm()});
+    auto dist = [&](Real time) {
+      const Pose pm = mm.at(time), pb = mb.at(time);
+      return to_world(triangle_convex(v[tri[0]], v[tri[1]], v[tri[2]], b, pm.relative(pb), true, st.gjk,
+                                      EpaSettings{}),
+                      pm);
+    };
+    const ToiResult r = advance(dist, dv, spin, duration, st);
+    if (r.status == QueryStatus::kUnsupported) {
+      unsupported_pair = true;
+      return false;
+    }
+    keep_earliest(best, any, r);
+    return true;
+  });
+  if (unsupported_pair) {
+    best.status = QueryStatus::kUnsupported;
+    return best;
+  }
+  if (!any) {
+    best.time = duration;
+    best.iterations = 0;
+  }
+  return best;
+}
+
+ToiResult toi_pair(const Shape& a, const Motion& ma, const Shape& b, const Motion& mb, Real duration,
+                   const ToiSettings& st) {
+  const ShapeType ta = a.type(), tb = b.type();
+  if (ta == ShapeType::kCompound) return toi_compound(static_cast<const Compound&>(a), ma, b, mb, duration, st);
+  if (tb == ShapeType::kCompound)
+    return mirrored(toi_compound(static_cast<const Compound&>(b), mb, a, ma, duration, st));
+  if (ta == ShapeType::kTriangleMesh && b.is_convex())
+    return toi_mesh(static_cast<const TriangleMesh&>(a), ma, static_cast<const ConvexShape&>(b), mb, duration,
+                    st);
+  if (a.is_convex() && tb == ShapeType::kTriangleMesh)
+    return mirrored(toi_mesh(static_cast<const TriangleMesh&>(b), mb, static_cast<const ConvexShape&>(a), ma,
+                             duration, st));
+  // Convex pairs and convex against a plane (one slab), or unsupported pairs (the first
+  // distance query says so).
+  ToiResult res;
+  const Real wa = ma.angular_velocity.norm(), wb = mb.angular_velocity.norm();
+  // A shape that does not turn needs no rotation bound (a plane may translate).
+  const Real spin = (wa > 0 ? wa * rotation_bound(a, ma.center) : 0) + (wb > 0 ? wb * rotation_bound(b, mb.center) : 0);
+  if (!std::isfinite(spin)) {
+    res.status = QueryStatus::kUnsupported;
+    return res;
+  }
+  auto dist = [&](Real t) {
+    const Pose pa = ma.at(t), pb = mb.at(t);
+    DistanceResult d = pair_query(Mode::kDistance, a, pa, b, pb, st.gjk, EpaSettings{});
+    // Overlapping (at the start, within GJK's round-off of touching, or allowed by a
+    // negative target): the signed distance and the penetration normal.
+    if (d.status != QueryStatus::kUnsupported && d.intersecting)
+      d = pair_query(Mode::kSigned, a, pa, b, pb, st.gjk, EpaSettings{});
+    return d;
+  };
+  return advance(dist, ma.linear_velocity - mb.linear_velocity, spin, duration, st);
+}
+
+}  // namespace
+
+ToiResult time_of_impact(const Shape& a, const Motion& motion_a, const Shape& b, const Motion& motion_b,
+                         Real duration, const ToiSettings& settings) {
+  check_motion("motion_a", motion_a);
+  check_motion("motion_b", motion_b);
+  if (!(duration >= 0) || !std::isfinite(duration))
+    throw InvalidArgument("duration must be finite and >= 0, got " + std::to_string(duration));
+  if (!(settings.tolerance > 0) || !std::isfinite(settings.tolerance))
+    throw InvalidArgument("tolerance must be finite and > 0, got " + std::to_string(settings.tolerance));
+  if (!std::isfinite(settings.target_distance))
+    throw InvalidArgument("target_distance must be finite, got " + std::to_string(settings.target_distance));
+  if (settings.max_iterations < 1)
+    throw InvalidArgument("max_iterations must be >= 1, got " + std::to_string(settings.max_iterations));
+  return toi_pair(a, motion_a, b, motion_b, duration, settings);
+}
+
+Real inner_radius(const Shape& shape) {
+  switch (shape.type()) {
+    case ShapeType::kSphere:
+      return static_cast<const Sphere&>(shape).radius();
+    case ShapeType::kBox:
+      return static_cast<const Box&>(shape).half_extents().minCoeff();
+    case ShapeType::kCapsule:
+      return static_cast<const Capsule&>(shape).radius();
+    case ShapeType::kCylinder: {
+      const auto& c = static_cast<const Cylinder&>(shape);
+      return std::min(c.cylinder_radius(), c.half_height());
+    }
+    case ShapeType::kConvexHull: {
+      const auto& h = static_cast<const ConvexHull&>(shape);
+      Vec3 mean = Vec3::Zero();
+      for (const Vec3& p : h.vertices()) mean += p;
+      mean /= static_cast<Real>(h.vertices().size());
+      Real r = kInf;
+      for (const ConvexHull::Face& f : h.faces()) r = std::min(r, f.offset - f.normal.dot(mean));
+      return std::max(r, Real(0)) + h.radius();
+    }
+    case ShapeType::kCompound: {
+      Real r = kInf;
+      for (const Compound::Child& c : static_cast<const Compound&>(shape).children())
+        r = std::min(r, inner_radius(*c.shape));
+      return r;
+    }
+    default:
+      return 0;
+  }
+}
+
+Real bounding_radius(const Shape& shape, const Vec3& center) {
+  if (shape.type() == ShapeType::kPlane) return kInf;
+  const Aabb box = shape.local_aabb();
+  return (box.min - center).cwiseAbs().cwiseMax((box.max - center).cwiseAbs()).norm();
 }
 
 }  // namespace wmo

@@ -43,6 +43,10 @@ struct BodyDef {
   Real linear_damping = 0;   ///< unit: 1/s, v *= 1 / (1 + h * damping) per step
   Real angular_damping = 0;  ///< unit: 1/s, same form for the angular velocity
   Real gravity_scale = 1;    ///< multiplies the world's gravity for this body
+  /// Continuous collision detection for this body (WorldSettings::enable_ccd must be on
+  /// too): it never passes through anything, however fast it moves or spins. Off by
+  /// default; only the bodies that ask pay for it (see world.h, the ccd stage).
+  bool ccd = false;
 };
 
 /// Mass data of a body in its shape's local frame.

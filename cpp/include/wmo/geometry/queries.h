@@ -62,6 +62,12 @@ struct ToiSettings {
   /// for a pair closing at speed v it is earlier by at most tolerance / v. 1e-4 m is a
   /// tenth of a millimetre: far below a contact margin, far above GJK's error.
   Real tolerance = 1e-4;
+  /// Signed distance (m) that counts as contact: the search finds the first time the
+  /// shapes come within `tolerance` above it. 0 (the default) is touching; a negative
+  /// value is a penetration depth the caller allows (the world's CCD stops a body at a
+  /// small overlap, so that its next step makes a contact there); a positive value
+  /// stops at a gap. Below zero the distance is measured by EPA (penetration depth).
+  Real target_distance = 0;
   /// Cap on distance evaluations. Pure translation converges in two or three; rotation
   /// converges linearly (each step closes a fraction of the gap set by how much of the
   /// rotation bound is real), so a fast-spinning slender body may use tens.
@@ -76,11 +82,11 @@ struct ToiResult {
   /// stopped the search (then `hit` is true at the last safe time, so a caller that
   /// stops the bodies there never lets them pass through each other).
   QueryStatus status = QueryStatus::kOk;
-  /// True if the shapes come within `tolerance` of each other during the interval.
+  /// True if the shapes come within `tolerance` of `target_distance` (by default: of
+  /// touching) during the interval.
   bool hit = false;
-  /// Time of impact (s) from the start: the first time found with distance <=
-  /// tolerance; `duration` on a miss. 0 with `initially_overlapping` if they start
-  /// overlapping.
+  /// Time of impact (s) from the start: the first time found with signed distance <=
+  /// target_distance + tolerance; `duration` on a miss; 0 if they start that close.
   Real time = 0;
   bool initially_overlapping = false;
   /// At `time` (on a miss: at the last time evaluated): separation distance (m; minus
@@ -90,7 +96,7 @@ struct ToiResult {
   Vec3 point_a = Vec3::Zero();
   Vec3 point_b = Vec3::Zero();
   Vec3 normal = Vec3::Zero();
-  /// Distance evaluations made.
+  /// Distance evaluations made (over every child or triangle of a compound or mesh).
   int iterations = 0;
 };
 
@@ -102,12 +108,27 @@ struct ToiResult {
 /// most (v_a . n + |w_a| r_a) per second and B's by (-v_b . n + |w_b| r_b), where r is
 /// the largest distance of the shape's core from its rotation centre (the rounding
 /// radius of a sphere, capsule or rounded box does not change under rotation, so it is
-/// left out). No contact can happen before d over their sum, so time advances by that
-/// (less half the tolerance, so the last step lands within the tolerance instead of at
-/// exactly zero). Works for every pair `distance` supports: convex pairs, convex against
-/// plane, triangle mesh or compound. Throws InvalidArgument for a negative or
-/// non-finite duration, non-finite motion, or tolerance <= 0 / max_iterations < 1.
+/// left out). The signed distance is the largest gap over all directions, so it can
+/// fall no faster than that sum, overlapping or not: time advances by (d - target) over
+/// the sum (less half the tolerance, so the last step lands within the tolerance instead
+/// of exactly on the target). The slab argument holds for convex pairs (and convex
+/// against a plane); a compound is searched child by child and a triangle mesh triangle
+/// by triangle (the triangles its BVH finds in the other shape's swept box), each a
+/// convex pair, and the earliest hit wins: one slab for a whole concave shape would let
+/// a fast body pass a far triangle while a near one sets a slow bound. Throws
+/// InvalidArgument for a negative or non-finite duration, non-finite motion or target,
+/// or tolerance <= 0 / max_iterations < 1 (max_iterations caps each convex pair).
 ToiResult time_of_impact(const Shape& a, const Motion& motion_a, const Shape& b, const Motion& motion_b,
                          Real duration, const ToiSettings& settings = {});
+
+/// Radius (m) of the largest ball about the shape's centre (the origin of a primitive,
+/// the vertex mean of a hull) that fits inside it: its half-thickness. For a compound
+/// the smallest of its children's; 0 for a plane or a triangle mesh. The world's CCD
+/// measures how fast a body moves against this size.
+Real inner_radius(const Shape& shape);
+
+/// Largest distance (m) of any point of the shape from its local point `center`, an
+/// upper bound from the corners of its local bounding box; infinite for a plane.
+Real bounding_radius(const Shape& shape, const Vec3& center);
 
 }  // namespace wmo
