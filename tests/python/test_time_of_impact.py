@@ -161,6 +161,48 @@ def test_fast_box_against_a_triangle_mesh_floor():
     assert r.hit and 0.009 - TOL / 100 <= r.time <= 0.009
 
 
+def test_a_far_triangle_closing_fast_is_not_hidden_by_a_near_one():
+    """A box falls at 80 m/s beside a wall (2 mm away, the nearest triangles) onto the
+    floor 3 m below, one mesh. One slab for the whole mesh (the wall's normal, across
+    which the box does not move) would answer "never"; the mesh is searched triangle by
+    triangle."""
+    v = np.array([[-5, 0, -5], [5, 0, -5], [5, 0, 5], [-5, 0, 5],  # floor, y = 0
+                  [0.102, 0, -5], [0.102, 0, 5], [0.102, 10, 5], [0.102, 10, -5]], float)  # wall, x = 0.102
+    mesh = wmo.TriangleMesh(v, [[0, 2, 1], [0, 3, 2], [4, 5, 6], [4, 6, 7]])
+    box = wmo.Box((0.1, 0.1, 0.1))
+    r = G.time_of_impact(box, pose(0.0, 3.1, 0.0), mesh, pose(), velocity_a=(0, -80, 0), duration=0.1)
+    assert r.hit and r.status == "ok"
+    assert 3.0 / 80 - TOL / 80 <= r.time <= 3.0 / 80 + 1e-12
+    assert r.normal[1] == pytest.approx(-1.0, abs=1e-6)  # from the box to the floor
+
+
+def test_a_far_compound_child_closing_fast_is_found():
+    """A compound moving at 60 m/s along +z: its near child slides 1 mm past a side wall
+    (the nearest pair, across which it does not move), its far child runs into an end
+    wall 2 m ahead. The answer is the far child's time."""
+    moving = wmo.Compound([(wmo.Box((0.1, 0.1, 0.1)), pose()), (wmo.Sphere(0.1), pose(0.0, 0.0, 2.0))])
+    walls = wmo.Compound([(wmo.Box((0.05, 5.0, 5.0)), pose(0.151, 0.0, 0.0)),  # side: 1 mm beside the box
+                          (wmo.Box((5.0, 5.0, 0.05)), pose(0.0, 0.0, 4.15))])  # end: face at z = 4.1
+    r = G.time_of_impact(moving, pose(), walls, pose(), velocity_a=(0, 0, 60), duration=0.1)
+    assert r.hit
+    gap = 4.1 - 2.1  # the end wall's face minus the sphere's front
+    assert gap / 60 - TOL / 60 <= r.time <= gap / 60 + 1e-12
+
+
+def test_target_distance_finds_a_given_overlap():
+    """Head-on spheres (radius 0.5) 3 m apart closing at 10 m/s reach 1 cm of overlap at
+    (2 + 0.01) / 10 s, and come within 5 cm at (2 - 0.05) / 10 s."""
+    s = wmo.Sphere(0.5)
+    for target, gap in [(-0.01, 2.01), (0.05, 1.95), (0.0, 2.0)]:
+        r = G.time_of_impact(s, pose(), s, pose(3.0), velocity_a=(5, 0, 0), velocity_b=(-5, 0, 0),
+                             duration=1.0, target_distance=target)
+        assert r.hit
+        assert gap / 10 - TOL / 10 <= r.time <= gap / 10 + 1e-12
+        assert target <= r.distance <= target + TOL
+    with pytest.raises(ValueError, match="target_distance"):
+        G.time_of_impact(s, pose(), s, pose(3.0), target_distance=math.nan)
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_never_later_than_the_first_contact_under_rotation(seed):
     """Random convex pairs with linear and angular motion: no overlap anywhere before the

@@ -219,6 +219,7 @@ BodyId World::add_body(const BodyDef& def) {
   const bool ccd = def.ccd && def.kind == BodyKind::kDynamic;
   ccd_.push_back(ccd);
   ccd_count_ += ccd;
+  ccd_rows_dirty_ = ccd_rows_dirty_ || ccd;
   inner_radius_.push_back(inner_radius(*def.shape));
   outer_radius_.push_back(bounding_radius(*def.shape, m.local_com));
   // Dense indices of the last step's constraints stay valid (the new row is at the end).
@@ -262,6 +263,7 @@ void World::remove_body(BodyId id) {
   swap_remove(sleep_position_, i);
   swap_remove(sleep_orientation_, i);
   ccd_count_ -= ccd_[i];
+  ccd_rows_dirty_ = true;  // rows move
   swap_remove(ccd_, i);
   swap_remove(inner_radius_, i);
   swap_remove(outer_radius_, i);
@@ -298,6 +300,7 @@ void World::set_ccd(BodyId id, bool on) {
   const bool flag = on && kinds_[i] == BodyKind::kDynamic;  // only dynamic bodies are swept
   ccd_count_ += static_cast<int>(flag) - ccd_[i];
   ccd_[i] = flag;
+  ccd_rows_dirty_ = true;
 }
 
 void World::set_linear_velocity(BodyId id, const Vec3& v) {
@@ -729,8 +732,18 @@ void World::run_step() {
   const Real spec = settings_.speculative_distance;
   const bool ccd = ccd_active();
   if (ccd) {  // the ccd stage sweeps bodies from here
-    start_positions_.assign(positions_.begin(), positions_.end());
-    start_orientations_.assign(orientations_.begin(), orientations_.end());
+    if (ccd_rows_dirty_) {
+      ccd_rows_.clear();
+      for (int i = 0; i < n; ++i)
+        if (ccd_[i]) ccd_rows_.push_back(i);
+      ccd_rows_dirty_ = false;
+    }
+    start_positions_.resize(n);
+    start_orientations_.resize(n);
+    for (const int i : ccd_rows_) {
+      start_positions_[i] = positions_[i];
+      start_orientations_[i] = orientations_[i];
+    }
   }
 
   // ---- update_broadphase: proxies of bodies that can move. ----
@@ -892,10 +905,6 @@ void World::run_step() {
         if (kinds_[i] != BodyKind::kDynamic) continue;
         linear_velocities_[i] = block[j].v;
         angular_velocities_[i] = block[j].w;
-        if (body_flags_[i] & kHasForce) {
-          forces_[i].setZero();
-          torques_[i].setZero();
-        }
       }
       block_size = 0;
     };
@@ -968,8 +977,6 @@ void World::run_step() {
       if (kinds_[i] != BodyKind::kDynamic) continue;
       linear_velocities_[i] = states_[i].v;
       angular_velocities_[i] = states_[i].w;
-      forces_[i].setZero();
-      torques_[i].setZero();
     }
     // Entries are updated in place and the ones no constraint refreshed are dropped
     // after: clearing and reinserting every entry cost an allocation and a free per
@@ -1001,6 +1008,13 @@ void World::run_step() {
     ccd_hits_ = 0;
     if (ccd) t.set_count(continuous_step());
   }
+  // Forces and torques act for one step (the ccd stage reads them to bound how far the
+  // bodies it does not sweep may have moved).
+  for (int i = 0; i < n; ++i)
+    if (body_flags_[i] & kHasForce) {
+      forces_[i].setZero();
+      torques_[i].setZero();
+    }
   // ---- update_sleep ----
   {
     StageTimer t(profile_[kUpdateSleep]);
@@ -1040,20 +1054,23 @@ int World::continuous_step() {
   // pose (its centre of mass along a line, turning about it at a constant rate: the
   // motion time_of_impact sweeps). Every other moving body may have left its broadphase
   // box (set at the step's start) by at most `reach_others`.
-  Real reach_others = 0;
-  for (int i = 0; i < n; ++i) {
-    if (!awake_[i]) continue;  // static or sleeping: did not move
+  for (const int i : ccd_rows_) {
+    if (!awake_dynamic(i)) continue;
+    // Cheap bound first (no trigonometry): the points of a body move at most
+    // |d origin| + angle * (largest distance from the origin), and angle <= pi |vec(dq)|
+    // (|vec(dq)| = sin(angle / 2), angle in [0, pi]).
+    const Quat dq = orientations_[i] * start_orientations_[i].conjugate();
+    const Real bound = (positions_[i] - start_positions_[i]).norm() +
+                       kPi * dq.vec().norm() * (outer_radius_[i] + masses_[i].local_com.norm());
+    const Real slow = settings_.ccd_motion_threshold * inner_radius_[i];
+    if (!(bound > slow)) continue;
     const Vec3& lc = masses_[i].local_com;
     const Vec3 c0 = start_positions_[i] + start_orientations_[i] * lc;
     const Vec3 c1 = world_com(i);
     const Vec3 rot = rotation_vector(start_orientations_[i], orientations_[i]);
     const Real angle = rot.norm();
     const Real reach = (c1 - c0).norm() + angle * outer_radius_[i];
-    if (!ccd_[i] || kinds_[i] != BodyKind::kDynamic ||
-        !(reach > settings_.ccd_motion_threshold * inner_radius_[i])) {
-      reach_others = std::max(reach_others, reach);
-      continue;
-    }
+    if (!(reach > slow)) continue;
     Sweep sw;
     sw.body = i;
     sw.linear = (c1 - c0) / dt;
@@ -1071,6 +1088,31 @@ int World::continuous_step() {
     sweeps_.push_back(sw);
   }
   if (sweeps_.empty()) return 0;
+  // How far every other moving body may have left its broadphase box (set at the
+  // step's start): from its motion over the step where the solver kept it (bodies in
+  // contact), else from its velocity and acceleration (a free body's velocity changes
+  // at a constant rate over the step, so it moved at most dt (|v_end| + |a| dt)).
+  Real reach_others = 0;
+  for (int i = 0; i < n; ++i) {
+    if (!awake_[i] || sweep_of_[i] >= 0) continue;
+    const Real r = outer_radius_[i];
+    Real reach;
+    if (body_flags_[i] & kInContact) {
+      reach = states_[i].dp.norm() + kPi * states_[i].dq.vec().norm() * r;
+    } else {
+      Vec3 a = Vec3::Zero(), alpha = Vec3::Zero();
+      if (kinds_[i] == BodyKind::kDynamic) {
+        a = gravity_scale_[i] * settings_.gravity;
+        if (body_flags_[i] & kHasForce) {
+          a += masses_[i].inv_mass * forces_[i];
+          alpha = world_inv_inertia(orientations_[i], masses_[i].inv_inertia_local) * torques_[i];
+        }
+      }
+      reach = dt * (linear_velocities_[i].norm() + a.norm() * dt) +
+              dt * (angular_velocities_[i].norm() + alpha.norm() * dt) * r;
+    }
+    reach_others = std::max(reach_others, reach);
+  }
 
   auto motion_of = [&](const Sweep& sw) {
     const int i = sw.body;

@@ -1,6 +1,7 @@
 // World: handles, integration against closed forms, resting contact, stacking, bad input.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <memory>
 #include <string>
@@ -299,4 +300,60 @@ TEST(World, RotatedSleepingBodyStaysAsleepAcrossStepCalls) {
     w.step(1);
     ASSERT_FALSE(w.is_awake(w.index_of(a))) << "woke at call " << k;
   }
+}
+
+namespace {
+
+/// A 2 m rod (capsule, radius 2 cm) lying along z at the origin, spinning about y at
+/// 100 rad/s, beside a 1 cm static wall whose face is at x = 0.9. Returns the largest x
+/// any point of the rod reached at the end of a step over 30 steps.
+Real spinning_rod_reach(bool ccd, int* hits) {
+  WorldSettings s;
+  s.gravity = Vec3::Zero();
+  World w(s);
+  w.add_body(box_def(Vec3(0.005, 2, 2), Vec3(0.905, 0, 0), BodyKind::kStatic));
+  BodyDef rod;
+  rod.shape = std::make_shared<Capsule>(0.02, 1.0);
+  rod.orientation = Quat(Eigen::AngleAxis<Real>(kPi / 2, Vec3::UnitX()));
+  rod.angular_velocity = Vec3(0, 100, 0);
+  rod.ccd = ccd;
+  const BodyId id = w.add_body(rod);
+  Real reach = -kInf;
+  *hits = 0;
+  for (int k = 0; k < 30; ++k) {
+    w.step();
+    *hits += w.ccd_hit_count();
+    const int i = w.index_of(id);
+    const Vec3 axis = w.orientations()[i] * Vec3::UnitY();
+    reach = std::max(reach, w.positions()[i].x() + std::abs(axis.x()) + 0.02);
+  }
+  return reach;
+}
+
+}  // namespace
+
+TEST(WorldCcd, SpinningRodGoesThroughTheWallWithoutCcdAndHitsItWithCcd) {
+  int hits = 0;
+  EXPECT_GT(spinning_rod_reach(false, &hits), 0.91);  // a tip ended a step past the wall
+  EXPECT_EQ(hits, 0);
+  EXPECT_LE(spinning_rod_reach(true, &hits), 0.9 + 0.05 * 0.02 + 1e-9);  // the face, but for the allowance
+  EXPECT_GE(hits, 1);
+}
+
+TEST(WorldCcd, StageIsSkippedWhenNoBodyAsksAndForSlowBodies) {
+  World w = ground_world();
+  BodyDef d = box_def(Vec3(0.5, 0.5, 0.5), Vec3(0, 0.5, 0));
+  const BodyId id = w.add_body(d);
+  w.step(10);
+  const auto ccd_stage = static_cast<std::size_t>(std::find(kStageNames.begin(), kStageNames.end(), std::string("ccd")) -
+                                                  kStageNames.begin());
+  ASSERT_LT(ccd_stage, kStageNames.size());
+  EXPECT_EQ(w.profile()[ccd_stage].runs, 0);
+  w.set_ccd(id, true);  // resting: slower than half its inner radius per step
+  EXPECT_TRUE(w.ccd(w.index_of(id)));
+  w.step(10);
+  EXPECT_EQ(w.profile()[ccd_stage].total_count, 0);
+  WorldSettings bad = w.settings();
+  bad.ccd_penetration = 0;
+  EXPECT_THROW(w.set_settings(bad), InvalidArgument);
 }

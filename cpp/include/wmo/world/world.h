@@ -402,11 +402,13 @@ class World {
   std::vector<std::uint8_t> traits_;
   // CCD, per dense row: the flag (BodyDef::ccd), the shape's inner radius and its
   // bounding radius about the centre of mass (m); the number of flagged bodies; the
-  // poses at the start of the step (kept while CCD is active) and the ccd stage's
-  // scratch.
+  // poses at the start of the step (kept for the flagged rows while CCD is active) and
+  // the ccd stage's scratch.
   std::vector<std::uint8_t> ccd_;
   std::vector<Real> inner_radius_, outer_radius_;
   int ccd_count_ = 0;
+  std::vector<int> ccd_rows_;  ///< rows with the flag (rebuilt when dirty)
+  bool ccd_rows_dirty_ = false;
   int ccd_hits_ = 0;
   std::vector<Vec3> start_positions_;
   std::vector<Quat> start_orientations_;

@@ -1,0 +1,345 @@
+"""Continuous collision detection in the world (issue 4): each case runs with CCD off
+first and shows the failure (the body passes through, or the spheres miss each other),
+then with ``ccd=True`` on the fast body and checks that it is stopped (or bounced) at
+the obstacle, that no step adds energy, and that nothing is left inside anything.
+
+Two halves are tested (WorldSettings::enable_ccd): speculative contacts for CCD pairs
+(a fast body that approaches an obstacle at the start of the step) and the ccd stage's
+time-of-impact sweep (what the speculative margin cannot see: rotation, a velocity the
+step itself gives). Units: metres, kilograms, seconds.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import wmo
+from wmo import geometry as G
+
+DT = 1 / 60
+
+
+def energy(world: wmo.World) -> float:
+    """Kinetic plus potential energy (J) of the dynamic bodies; every shape here has its
+    centre of mass at its origin."""
+    g = np.asarray(world.gravity)
+    pe = 0.0
+    for i in range(world.body_count):
+        b = world.body(i)
+        if b.kind == "dynamic":
+            pe -= b.mass * float(g @ world.positions[i])
+    return world.kinetic_energy() + pe
+
+
+def run(world: wmo.World, steps: int, check=None) -> list[float]:
+    """Steps the world, returns the energy after each step; `check(world)` after each."""
+    out = []
+    for _ in range(steps):
+        world.step()
+        out.append(energy(world))
+        if check is not None:
+            check(world)
+    return out
+
+
+def assert_no_energy_gain(e0: float, energies: list[float]) -> None:
+    # Semi-implicit Euler loses energy in free fall and contacts only take it away:
+    # any gain would come from CCD. The slack is rounding on a sum of ~|e0|.
+    assert max(energies) <= e0 + 1e-9 * max(1.0, abs(e0)), (e0, max(energies))
+
+
+def rotate_y_to(axis: str) -> tuple:
+    """Quaternion (x, y, z, w) turning local +y onto +z ('z') or +x ('x')."""
+    s = math.sqrt(0.5)
+    return (s, 0.0, 0.0, s) if axis == "z" else (0.0, 0.0, -s, s)
+
+
+# ---- a 0.05 m ball at 500 m/s against a 1 cm plate ----------------------------------
+
+def ball_and_plate(ccd: bool, restitution: float = 0.0, gravity=(0.0, 0.0, 0.0)):
+    w = wmo.World(gravity=gravity, dt=DT)
+    w.add_body(wmo.Box((1.0, 0.005, 1.0)), kind="static", restitution=restitution)
+    ball = w.add_body(wmo.Sphere(0.05), position=(0.0, 3.0, 0.0), linear_velocity=(0.0, -500.0, 0.0),
+                      restitution=restitution, ccd=ccd)
+    return w, ball
+
+
+def test_ball_passes_through_the_plate_without_ccd():
+    w, ball = ball_and_plate(ccd=False)
+    w.step(2)
+    assert ball.position[1] < -5  # 8.3 m per step: it never touched the plate
+
+
+@pytest.mark.parametrize("restitution", [0.0, 0.8])
+def test_ball_stops_or_bounces_at_the_plate_with_ccd(restitution):
+    w, ball = ball_and_plate(ccd=True, restitution=restitution)
+    e0 = energy(w)
+    lowest = []
+    energies = run(w, 30, lambda w: lowest.append(ball.position[1]))
+    assert min(lowest) >= 0.005 + 0.05 - 0.05 * 0.05  # never below the plate's top, but for the allowance
+    assert_no_energy_gain(e0, energies)
+    if restitution == 0:
+        assert ball.position[1] == pytest.approx(0.055, abs=1e-3)
+        assert np.linalg.norm(ball.linear_velocity) < 1e-6
+    else:  # bounced: moving up at e * 500 m/s
+        assert ball.linear_velocity[1] == pytest.approx(0.8 * 500, rel=1e-3)
+
+
+def test_ball_given_its_speed_within_the_step_is_caught_by_the_time_of_impact_sweep():
+    """Starting at rest, a force brings the ball to ~500 m/s within one step: the
+    speculative margin (from the velocity at the step's start) is zero, so only the ccd
+    stage's sweep can catch it."""
+    results = {}
+    for ccd in (False, True):
+        w = wmo.World(gravity=(0, 0, 0), dt=DT)
+        w.add_body(wmo.Box((1.0, 0.005, 1.0)), kind="static")
+        ball = w.add_body(wmo.Sphere(0.05), position=(0.0, 3.0, 0.0), mass=1.0, ccd=ccd)
+        w.apply_force(ball, (0.0, -500.0 / DT, 0.0), ball.position)  # 500 m/s after one step
+        w.step()
+        results[ccd] = (ball.position[1], w.ccd_hits, w.profile["ccd"]["count"])
+        w.step(5)
+        results[ccd] += (ball.position[1],)
+    assert results[False][0] < -2.0 and results[False][3] < -30  # straight through
+    y, hits, swept, y_later = results[True]
+    assert swept == 1 and hits == 1  # the sweep put it back at the plate
+    assert 0.055 - 0.05 * 0.05 <= y <= 0.055 + 1e-3
+    assert y_later >= 0.055 - 0.05 * 0.05  # the next steps' contact holds it there
+
+
+def test_putting_a_body_back_adds_no_energy():
+    """Gravity on, restitution 1: the sweep puts the ball back up its path (gaining
+    potential energy) and reverses its velocity (keeping its kinetic energy), so the
+    potential energy gained must come out of the kinetic energy: the step ends with no
+    more energy than the same step without CCD."""
+    ends = {}
+    for ccd in (False, True):
+        w = wmo.World(gravity=(0, -9.81, 0), dt=DT)
+        w.add_body(wmo.Box((1.0, 0.005, 1.0)), kind="static", restitution=1.0)
+        ball = w.add_body(wmo.Sphere(0.05), position=(0.0, 3.0, 0.0), mass=1.0, restitution=1.0, ccd=ccd)
+        w.apply_force(ball, (0.0, -500.0 / DT, 0.0), ball.position)
+        w.step()
+        ends[ccd] = (energy(w), w.ccd_hits, ball.linear_velocity[1])
+    (e_plain, _, _), (e_ccd, hits, vy) = ends[False], ends[True]
+    assert hits == 1 and vy > 400  # put back and bounced
+    assert e_ccd <= e_plain + 1e-9 * abs(e_plain)
+
+
+# ---- a 1 mm box falling from 100 m onto a 1 mm plate --------------------------------
+
+def thin_box_on_plate(ccd: bool):
+    w = wmo.World(gravity=(0, -9.81, 0), dt=DT)
+    w.add_body(wmo.Box((0.5, 0.0005, 0.5)), kind="static")
+    box = w.add_body(wmo.Box((0.1, 0.0005, 0.1)), position=(0.0, 100.0, 0.0), mass=0.05, ccd=ccd)
+    return w, box
+
+
+def test_thin_box_falls_through_the_thin_plate_without_ccd():
+    w, box = thin_box_on_plate(ccd=False)
+    w.step(5 * 60)  # ~4.5 s to fall 100 m, at ~44 m/s (0.74 m per step)
+    assert box.position[1] < -10
+
+
+def test_thin_box_lands_on_the_thin_plate_with_ccd():
+    w, box = thin_box_on_plate(ccd=True)
+    e0 = energy(w)
+    lowest = []
+    energies = run(w, 6 * 60, lambda w: lowest.append(box.position[1]))
+    assert min(lowest) > 0.0005  # its centre never reached the plate's top face
+    # Resting on it: touching at y = 1 mm, less the soft contact's sag under its weight
+    # (the spring of contact_hertz = 30 sags ~g / (2 pi 30)^2 per point: 0.47 mm measured
+    # here, 0.12 mm at 60 Hz), never through it.
+    assert 0.0005 < box.position[1] <= 0.001 + 1e-6
+    assert abs(box.linear_velocity[1]) < 1e-3
+    assert_no_energy_gain(e0, energies)
+
+
+# ---- two small spheres fired head-on at 300 m/s each --------------------------------
+
+def head_on(ccd: bool):
+    w = wmo.World(gravity=(0, 0, 0), dt=DT)
+    a = w.add_body(wmo.Sphere(0.05), position=(-7.0, 0.0, 0.0), linear_velocity=(300.0, 0.0, 0.0),
+                   mass=1.0, ccd=ccd)
+    b = w.add_body(wmo.Sphere(0.05), position=(7.0, 0.0, 0.0), linear_velocity=(-300.0, 0.0, 0.0),
+                   mass=1.0, ccd=ccd)
+    return w, a, b
+
+
+def test_head_on_spheres_pass_each_other_without_ccd():
+    w, a, b = head_on(ccd=False)
+    w.step(3)
+    assert a.position[0] > b.position[0]  # swapped sides: they never met
+    assert a.linear_velocity[0] == 300.0
+
+
+def test_head_on_spheres_collide_with_ccd():
+    w, a, b = head_on(ccd=True)
+    e0 = energy(w)
+    energies = run(w, 10)
+    assert a.position[0] < b.position[0]
+    assert b.position[0] - a.position[0] >= 0.1 - 0.05 * 0.05  # touching, not inside
+    assert abs(a.linear_velocity[0]) < 1e-6 and abs(b.linear_velocity[0]) < 1e-6  # inelastic, momentum 0
+    assert_no_energy_gain(e0, energies)
+
+
+def test_one_ccd_sphere_is_enough_for_a_fast_pair():
+    """CCD on one body of the pair covers the pair (the other asked for nothing)."""
+    w = wmo.World(gravity=(0, 0, 0), dt=DT)
+    a = w.add_body(wmo.Sphere(0.05), position=(-7.0, 0.0, 0.0), linear_velocity=(300.0, 0.0, 0.0), ccd=True)
+    b = w.add_body(wmo.Sphere(0.05), position=(7.0, 0.0, 0.0), linear_velocity=(-300.0, 0.0, 0.0))
+    w.step(10)
+    assert a.position[0] < b.position[0]
+
+
+# ---- a long thin rod spinning at 100 rad/s next to a wall ---------------------------
+
+def spinning_rod(ccd: bool):
+    """A 2 m rod (capsule of radius 2 cm) at the origin lying along z, spinning about y at
+    100 rad/s (1.67 rad per step, its tips at 102 m/s); a 1 cm wall whose face is at
+    x = 0.9, inside the circle the tips sweep (radius 1.02)."""
+    w = wmo.World(gravity=(0, 0, 0), dt=DT)
+    w.add_body(wmo.Box((0.005, 2.0, 2.0)), position=(0.905, 0.0, 0.0), kind="static")
+    rod = w.add_body(wmo.Capsule(0.02, 1.0), orientation=rotate_y_to("z"), angular_velocity=(0.0, 100.0, 0.0),
+                     ccd=ccd)
+    return w, rod
+
+
+def rod_reach_x(rod) -> float:
+    """Largest x any point of the rod reaches (m)."""
+    x, y, z, w_ = rod.orientation
+    axis_x = 2 * (x * y - w_ * z)  # x component of the rotated local +y
+    return rod.position[0] + abs(axis_x) * 1.0 + 0.02
+
+
+def test_spinning_rod_goes_through_the_wall_without_ccd():
+    w, rod = spinning_rod(ccd=False)
+    reach = []
+    run(w, 30, lambda w: reach.append(rod_reach_x(rod)))
+    assert max(reach) > 0.91  # a tip ended a step beyond the wall's far face
+
+
+def test_spinning_rod_hits_the_wall_with_ccd():
+    w, rod = spinning_rod(ccd=True)
+    e0 = energy(w)
+    reach = []
+    hits = []
+    energies = run(w, 30, lambda w: (reach.append(rod_reach_x(rod)), hits.append(w.ccd_hits)))
+    assert sum(hits) >= 1  # rotation: only the time-of-impact sweep sees it
+    assert max(reach) <= 0.9 + 0.05 * 0.02 + 1e-9  # never past the wall's face but for the allowance
+    assert_no_energy_gain(e0, energies)
+    # It hit the wall: knocked back (-x) instead of spinning in place.
+    assert rod.position[0] < -0.1
+
+
+# ---- a fast box against a triangle-mesh floor --------------------------------------
+
+def mesh_floor(ccd: bool):
+    w = wmo.World(gravity=(0, -9.81, 0), dt=DT)
+    v = [[-5.0, 0.0, -5.0], [5.0, 0.0, -5.0], [5.0, 0.0, 5.0], [-5.0, 0.0, 5.0]]
+    w.add_body(wmo.TriangleMesh(v, [[0, 2, 1], [0, 3, 2]]), kind="static")
+    box = w.add_body(wmo.Box((0.1, 0.1, 0.1)), position=(0.3, 5.0, -0.2), linear_velocity=(0.0, -80.0, 0.0),
+                     angular_velocity=(3.0, 0.0, 2.0), mass=1.0, ccd=ccd)
+    return w, box
+
+
+def test_fast_box_passes_through_the_mesh_floor_without_ccd():
+    w, box = mesh_floor(ccd=False)
+    w.step(10)
+    assert box.position[1] < -5
+
+
+def test_fast_box_lands_on_the_mesh_floor_with_ccd():
+    w, box = mesh_floor(ccd=True)
+    e0 = energy(w)
+    lowest = []
+    energies = run(w, 120, lambda w: lowest.append(box.position[1]))
+    assert min(lowest) > 0.1 - 0.1 * 0.05 - 1e-9  # the centre never below a half-extent above the floor
+    assert box.position[1] == pytest.approx(0.1, abs=0.01)  # resting on the floor
+    assert_no_energy_gain(e0, energies)
+
+
+# ---- what CCD costs and when it runs -------------------------------------------------
+
+def test_slow_ccd_bodies_take_the_ordinary_path():
+    """A CCD body moving less than ccd_motion_threshold x its inner radius per step is not
+    swept: the stage counts no body, and the step is the same as without CCD."""
+    states = {}
+    for ccd in (False, True):
+        w = wmo.World(gravity=(0, -9.81, 0), dt=DT, sleeping=False)
+        w.add_body(wmo.Box((5, 0.5, 5)), position=(0, -0.5, 0), kind="static")
+        boxes = [w.add_body(wmo.Box((0.5, 0.5, 0.5)), position=(0.0, 0.5 + k, 0.0), ccd=ccd) for k in range(3)]
+        w.step(60)
+        states[ccd] = np.array(w.positions).copy()
+        if ccd:
+            assert w.profile["ccd"]["total_count"] == 0
+            assert all(b.ccd for b in boxes)
+    np.testing.assert_array_equal(states[False], states[True])
+
+
+def test_the_world_switch_turns_ccd_off():
+    w = wmo.World(gravity=(0, 0, 0), dt=DT, ccd=False)
+    assert w.ccd is False
+    w.add_body(wmo.Box((1.0, 0.005, 1.0)), kind="static")
+    ball = w.add_body(wmo.Sphere(0.05), position=(0.0, 3.0, 0.0), linear_velocity=(0.0, -500.0, 0.0), ccd=True)
+    w.step(2)
+    assert ball.position[1] < -5
+    assert w.profile["ccd"]["runs"] == 0
+
+
+def test_ccd_flag_per_body():
+    w = wmo.World()
+    ground = w.add_body(wmo.Box((1, 1, 1)), kind="static", ccd=True)
+    b = w.add_body(wmo.Sphere(0.1))
+    assert ground.ccd is False  # only dynamic bodies are swept
+    assert b.ccd is False
+    b.ccd = True
+    assert b.ccd is True
+    b.ccd = False
+    assert b.ccd is False
+
+
+@pytest.mark.parametrize("field,value", [("ccd_motion_threshold", -0.1), ("ccd_motion_threshold", math.nan),
+                                         ("ccd_penetration", 0.0), ("ccd_penetration", -1.0)])
+def test_bad_ccd_settings_raise(field, value):
+    with pytest.raises(ValueError, match=field):
+        wmo.World(**{field: value})
+
+
+def test_ccd_never_leaves_a_body_inside_another():
+    """A shower of fast CCD spheres and boxes (40 to 120 m/s, spinning) into a closed box
+    of 1 cm walls: none ends a step overlapping a wall by more than its allowance, none
+    escapes, and the energy never grows."""
+    rng = np.random.default_rng(7)
+    w = wmo.World(gravity=(0, -9.81, 0), dt=DT, sleeping=False)
+    t = 0.005
+    walls = [((2.0, t, 2.0), (0.0, -t, 0.0)), ((2.0, t, 2.0), (0.0, 4.0 + t, 0.0)),
+             ((t, 2.0, 2.0), (-2.0 - t, 2.0, 0.0)), ((t, 2.0, 2.0), (2.0 + t, 2.0, 0.0)),
+             ((2.0, 2.0, t), (0.0, 2.0, -2.0 - t)), ((2.0, 2.0, t), (0.0, 2.0, 2.0 + t))]
+    for half, pos in walls:
+        w.add_body(wmo.Box(half), position=pos, kind="static")
+    shapes = [wmo.Sphere(0.1), wmo.Box((0.15, 0.05, 0.1))]
+    movers = []
+    for k in range(12):
+        speed = rng.uniform(40, 120)
+        d = rng.normal(size=3)
+        d /= np.linalg.norm(d)
+        movers.append(w.add_body(shapes[k % 2], position=rng.uniform([-1.5, 0.5, -1.5], [1.5, 3.5, 1.5]),
+                                 linear_velocity=speed * d, angular_velocity=rng.normal(size=3) * 20,
+                                 ccd=True))
+    e0 = energy(w)
+
+    def check(world):
+        for b in movers:
+            p = b.position
+            assert np.all(np.abs(p[[0, 2]]) < 2.0) and 0.0 < p[1] < 4.0, p  # still inside the box
+
+    energies = run(w, 120, check)
+    assert_no_energy_gain(e0, energies)
+    # No mover overlaps a wall by more than its allowance (5% of its inner radius).
+    inner = {0: 0.1, 1: 0.05}
+    for k, b in enumerate(movers):
+        for i in range(6):
+            half, pos = walls[i]
+            r = G.penetration(shapes[k % 2], (b.position, b.orientation), wmo.Box(half), (pos, (0, 0, 0, 1)))
+            assert r.distance >= -0.05 * inner[k % 2] - 1e-6
