@@ -110,7 +110,7 @@ def main() -> None:
         ax.bar(x, [r["step_ms"] for r in rs], color="#4c72b0", label="step")
         ax.bar(x, [r["ccd_stage_ms"] for r in rs], color="#dd8452", label="of which ccd stage")
         for xi, r in zip(x, rs):
-            ax.annotate(f"{r['deepest_penetration_m']:.2f} m", (xi, r["step_ms"]), ha="center", va="bottom",
+            ax.annotate(f"{r['deepest_penetration_m']:.3f} m", (xi, r["step_ms"]), ha="center", va="bottom",
                         fontsize=8)
         ax.set_xticks(x, MODES)
         ax.set_ylabel("ms per step")

@@ -343,3 +343,21 @@ def test_ccd_never_leaves_a_body_inside_another():
             half, pos = walls[i]
             r = G.penetration(shapes[k % 2], (b.position, b.orientation), wmo.Box(half), (pos, (0, 0, 0, 1)))
             assert r.distance >= -0.05 * inner[k % 2] - 1e-6
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "issue 4's bar, not met: boxes3000 with CCD on every box reaches 0.66 m (no CCD: 0.70 m; "
+    "bar 0.10 m). Its deep overlaps are not tunnelling but the soft contacts (30 Hz springs, one "
+    "Gauss-Seidel pass per substep) giving way under the falling columns' loads: 0.86 m even "
+    "with the narrowphase at 240 Hz, 0.13 m with 240 Hz springs at 960 Hz substeps. See the "
+    "issue's notes."))
+def test_boxes3000_with_ccd_on_every_box_penetrates_at_most_5_percent():
+    w = wmo.scenes.boxes3000(sleeping=False)
+    for i in range(w.body_count):
+        if w.body(i).kind == "dynamic":
+            w.body(i).ccd = True
+    deepest = 0.0
+    for _ in range(600):
+        w.step()
+        deepest = max(deepest, w.max_penetration)
+    assert deepest <= 0.05 * 2.0
