@@ -359,29 +359,17 @@ ToiResult advance(DistFn&& dist, const Vec3& dv, Real spin, Real duration, const
   return res;
 }
 
-// The earlier of two answers (a hit beats a miss; between misses the closer one is
-// kept, as the report of how near the shapes came). Evaluations add up.
+// The earlier of two answers (a hit beats a miss; between hits at the same time, and
+// between misses, the closer one is kept: at time 0 the deepest overlap, on a miss how
+// near the shapes came). Evaluations add up.
 void keep_earliest(ToiResult& best, bool& any, const ToiResult& r) {
   const int iterations = best.iterations + r.iterations;
-  if (!any || (r.hit && (!best.hit || r.time < best.time)) ||
-      (!r.hit && !best.hit && r.distance < best.distance))
+  const bool closer = r.distance < best.distance;
+  if (!any || (r.hit && (!best.hit || r.time < best.time || (r.time == best.time && closer))) ||
+      (!r.hit && !best.hit && closer))
     best = r;
-  best.iterations = any ? iterations : r.iterations;
+  best.iterations = iterations;
   any = true;
-}
-
-// Points the shape can reach during [0, duration] under motion m, as a world box:
-// the boxes at both ends when it does not turn, else the box of the ball that holds it
-// (bounding_radius about the rotation centre) swept along the centre's path.
-Aabb swept_box(const Shape& s, const Motion& m, Real duration) {
-  const Pose end = m.at(duration);
-  if (m.angular_velocity.isZero(0)) {
-    return Aabb::merge(s.world_aabb(m.start), s.world_aabb(end));
-  }
-  const Real r = bounding_radius(s, m.center);
-  const Vec3 c0 = m.start.transform_point(m.center);
-  const Vec3 c1 = c0 + duration * m.linear_velocity;
-  return Aabb(c0.cwiseMin(c1).array() - r, c0.cwiseMax(c1).array() + r);
 }
 
 ToiResult toi_pair(const Shape& a, const Motion& ma, const Shape& b, const Motion& mb, Real duration,
@@ -400,12 +388,12 @@ ToiResult toi_compound(const Compound& c, const Motion& mc, const Shape& o, cons
                        const ToiSettings& st) {
   ToiResult best;
   bool any = false;
-  const Aabb o_box = swept_box(o, mo, duration);
+  const Aabb o_box = swept_aabb(o, mo, duration);
   for (const Compound::Child& child : c.children()) {
     Motion m = mc;
     m.start = mc.start * child.pose;
     m.center = child.pose.inverse_transform_point(mc.center);
-    if (!swept_box(*child.shape, m, duration).overlaps(o_box)) continue;
+    if (!swept_aabb(*child.shape, m, duration).overlaps(o_box)) continue;
     const ToiResult r = toi_pair(*child.shape, m, o, mo, duration, st);
     if (r.status == QueryStatus::kUnsupported) return r;
     keep_earliest(best, any, r);
@@ -424,7 +412,7 @@ ToiResult toi_mesh(const TriangleMesh& mesh, const Motion& mm, const ConvexShape
   Aabb query;
   if (mm.angular_velocity.isZero(0)) {
     // B's swept box relative to the translating mesh, then in the mesh's frame.
-    Aabb box = swept_box(b, mb, duration);
+    Aabb box = swept_aabb(b, mb, duration);
     const Vec3 back = -duration * mm.linear_velocity;
     box.min += back.cwiseMin(Vec3::Zero());
     box.max += back.cwiseMax(Vec3::Zero());
@@ -557,6 +545,15 @@ Real inner_radius(const Shape& shape) {
     default:
       return 0;
   }
+}
+
+Aabb swept_aabb(const Shape& shape, const Motion& motion, Real duration) {
+  if (motion.angular_velocity.isZero(0))
+    return Aabb::merge(shape.world_aabb(motion.start), shape.world_aabb(motion.at(duration)));
+  const Real r = bounding_radius(shape, motion.center);
+  const Vec3 c0 = motion.start.transform_point(motion.center);
+  const Vec3 c1 = c0 + duration * motion.linear_velocity;
+  return Aabb(c0.cwiseMin(c1).array() - r, c0.cwiseMax(c1).array() + r);
 }
 
 Real bounding_radius(const Shape& shape, const Vec3& center) {

@@ -3,8 +3,6 @@
 
 #include "wmo/world/thread_pool.h"
 
-#include "wmo/geometry/queries.h"
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -1073,17 +1071,13 @@ int World::continuous_step() {
     if (!(reach > slow)) continue;
     Sweep sw;
     sw.body = i;
-    sw.linear = (c1 - c0) / dt;
-    sw.angular = rot / dt;
+    sw.motion.start = Pose(start_positions_[i], start_orientations_[i]);
+    sw.motion.center = lc;
+    sw.motion.linear_velocity = (c1 - c0) / dt;
+    sw.motion.angular_velocity = rot / dt;
+    sw.box = swept_aabb(*shapes_[i], sw.motion, dt);
     sw.reach = reach;
     sw.time = dt;
-    if (angle == 0) {
-      sw.box = Aabb::merge(shapes_[i]->world_aabb(Pose(start_positions_[i], start_orientations_[i])),
-                           shapes_[i]->world_aabb(Pose(positions_[i], orientations_[i])));
-    } else {  // the ball about the centre of mass that holds the body, swept
-      const Real r = outer_radius_[i];
-      sw.box = Aabb(c0.cwiseMin(c1).array() - r, c0.cwiseMax(c1).array() + r);
-    }
     sweep_of_[i] = static_cast<std::int32_t>(sweeps_.size());
     sweeps_.push_back(sw);
   }
@@ -1114,30 +1108,25 @@ int World::continuous_step() {
     reach_others = std::max(reach_others, reach);
   }
 
-  auto motion_of = [&](const Sweep& sw) {
-    const int i = sw.body;
-    Motion m;
-    m.start = Pose(start_positions_[i], start_orientations_[i]);
-    m.center = masses_[i].local_com;
-    m.linear_velocity = sw.linear;
-    m.angular_velocity = sw.angular;
-    return m;
-  };
   auto allowance_of = [&](int i) { return std::max(settings_.ccd_penetration * inner_radius_[i], Real(1e-7)); };
   // Sweeps body a (sweep sa) against body b moving by mb over the step, whose points
   // move at most reach_b: a may make no overlap with b deeper than half its allowance,
   // nor deepen one it starts with by more than a quarter of it. Records the earliest
   // such time in sa (with b, the normal from a to b and the contact point).
-  auto sweep_pair = [&](Sweep& sa, const Motion& ma, int b, const Motion& mb, Real reach_b, Real allowance) {
+  auto sweep_pair = [&](Sweep& sa, int b, const Motion& mb, Real reach_b, Real allowance) {
     const Real budget = 0.25 * allowance;
     if (sa.reach + reach_b <= budget) return;  // cannot get that much closer in one step
     const int a = sa.body;
-    const DistanceResult d0 = penetration(*shapes_[a], ma.start, *shapes_[b], mb.start);
-    if (d0.status == QueryStatus::kUnsupported) return;
     ToiSettings st;
     st.tolerance = 0.5 * budget;
-    st.target_distance = std::min(d0.distance - budget, -2 * budget);
-    const ToiResult r = time_of_impact(*shapes_[a], ma, *shapes_[b], mb, dt, st);
+    st.target_distance = -2 * budget;
+    ToiResult r = time_of_impact(*shapes_[a], sa.motion, *shapes_[b], mb, dt, st);
+    if (r.hit && r.time == 0 && r.status == QueryStatus::kOk) {
+      // Already deeper than that at the start (r.distance, the deepest overlap): it may
+      // deepen by the budget.
+      st.target_distance = r.distance - budget;
+      r = time_of_impact(*shapes_[a], sa.motion, *shapes_[b], mb, dt, st);
+    }
     if (!r.hit || r.status == QueryStatus::kUnsupported || !(r.time < sa.time)) return;
     sa.time = r.time;
     sa.hit_body = b;
@@ -1177,8 +1166,7 @@ int World::continuous_step() {
       if (!s1.box.overlaps(s2.box) || solver_saw(s1.body, s2.body)) continue;
       sweep_pairs_.emplace_back(order[k], order[l]);
       const Real before = s1.time;
-      sweep_pair(s1, motion_of(s1), s2.body, motion_of(s2), s2.reach,
-                 std::min(allowance_of(s1.body), allowance_of(s2.body)));
+      sweep_pair(s1, s2.body, s2.motion, s2.reach, std::min(allowance_of(s1.body), allowance_of(s2.body)));
       if (s1.time < before && s1.time < s2.time) {
         s2.time = s1.time;
         s2.hit_body = s1.body;
@@ -1193,7 +1181,6 @@ int World::continuous_step() {
   // solver put them in).
   for (Sweep& sw : sweeps_) {
     const int i = sw.body;
-    const Motion mi = motion_of(sw);
     const Real allowance = allowance_of(i);
     broadphase_->query_aabb(sw.box.fattened(reach_others), [&](ProxyId id) {
       const int j = slots_[static_cast<int>(broadphase_->user_data(id))].index;
@@ -1201,7 +1188,7 @@ int World::continuous_step() {
       if (awake_dynamic(j) && solver_saw(i, j)) return true;
       Motion mj;
       mj.start = Pose(positions_[j], orientations_[j]);
-      sweep_pair(sw, mi, j, mj, 0, allowance);
+      sweep_pair(sw, j, mj, 0, allowance);
       return true;
     });
   }
@@ -1222,10 +1209,9 @@ int World::continuous_step() {
         const int me = side ? y : x, other = side ? x : y;
         if (!(now[other] < seen[other])) continue;  // the other was not put back last round
         Motion mo;
-        mo.start = motion_of(sweeps_[other]).at(now[other]);
+        mo.start = sweeps_[other].motion.at(now[other]);
         const Real before = sweeps_[me].time;
-        sweep_pair(sweeps_[me], motion_of(sweeps_[me]), sweeps_[other].body, mo, 0,
-                   allowance_of(sweeps_[me].body));
+        sweep_pair(sweeps_[me], sweeps_[other].body, mo, 0, allowance_of(sweeps_[me].body));
         changed = changed || sweeps_[me].time < before;
       }
     }
@@ -1238,7 +1224,7 @@ int World::continuous_step() {
     if (!(sw.time < dt)) continue;
     const int i = sw.body;
     const Vec3 c_end = world_com(i);
-    const Pose p = motion_of(sw).at(sw.time);
+    const Pose p = sw.motion.at(sw.time);
     positions_[i] = p.position;
     orientations_[i] = p.rotation;
     const Vec3 c_t = world_com(i);

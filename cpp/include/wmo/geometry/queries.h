@@ -131,4 +131,10 @@ Real inner_radius(const Shape& shape);
 /// upper bound from the corners of its local bounding box; infinite for a plane.
 Real bounding_radius(const Shape& shape, const Vec3& center);
 
+/// World box (m) holding every point the shape passes through during [0, duration]
+/// under `motion`: the boxes at both ends when it does not turn, else the box of the
+/// ball that holds it (bounding_radius about the rotation centre) swept along the
+/// centre's path.
+Aabb swept_aabb(const Shape& shape, const Motion& motion, Real duration);
+
 }  // namespace wmo

@@ -34,6 +34,7 @@
 #include "wmo/collision/narrowphase.h"
 #include "wmo/dynamics/body.h"
 #include "wmo/dynamics/contact_solver.h"
+#include "wmo/geometry/queries.h"
 #include "wmo/world/flat_map.h"
 #include "wmo/world/shared_array.h"
 #include "wmo/world/thread_pool.h"
@@ -414,8 +415,8 @@ class World {
   std::vector<Quat> start_orientations_;
   struct Sweep {
     int body = -1;
+    Motion motion;         ///< start pose -> end pose over the step (about the centre of mass)
     Aabb box;              ///< world box of everything the body's points pass through
-    Vec3 linear, angular;  ///< velocities of the start -> end motion (m/s, rad/s)
     Real reach = 0;        ///< how far its points move over the step (m)
     Real time = kInf;      ///< earliest time of impact found (s); set to dt at the start
     int hit_body = -1;     ///< the body it hits then (dense row)
