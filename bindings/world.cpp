@@ -181,11 +181,14 @@ ccd : the world switch for continuous collision detection (default True); each b
     Two halves: a CCD body's pairs get speculative contacts covering their relative
     translation in the step (the solver stops it at the surface it approaches), and
     after the solve each fast CCD body is swept from its start to its end pose,
-    rotation included, against everything near its path (time of impact, conservative
-    advancement); one that would overlap something by more than its allowance is put
-    back at that time, its velocity kept but for the potential energy the move back
-    gains, so CCD never adds energy. Two fast CCD bodies are swept against each other,
-    both moving. The ``ccd`` stage of ``profile`` counts the bodies swept.
+    rotation included (time of impact, conservative advancement), against static,
+    sleeping and kinematic bodies, other fast CCD bodies (both moving) and the dynamic
+    bodies the solver had no contact with; one that would overlap something by more
+    than its allowance is put back at that time, an impulse stops the approach there,
+    and the potential energy the move back gains comes out of its kinetic energy, so
+    CCD never adds energy. CCD belongs to the fast body: a fast non-CCD body can pass
+    through a slow CCD one. The ``ccd`` stage of ``profile`` counts the bodies swept,
+    ``ccd_hits`` those put back.
 ccd_motion_threshold : a CCD body is swept only in steps where its points move more
     than this fraction of its inner radius (half-thickness; default 0.5): slower
     bodies take the ordinary path. 0 sweeps every CCD body every step.

@@ -192,6 +192,23 @@ def test_one_ccd_sphere_is_enough_for_a_fast_pair():
     assert a.position[0] < b.position[0]
 
 
+def test_fast_kinematic_bat_hits_a_resting_ccd_ball():
+    """A kinematic bat at 100 m/s (1.67 m a step) towards a ball at rest: without CCD it
+    jumps over the ball; with CCD on the ball (the bat's motion is known, so its
+    broadphase box is swept and the sweep follows it) the ball is carried ahead of it."""
+    for ccd in (False, True):
+        w = wmo.World(gravity=(0, 0, 0), dt=DT)
+        bat = w.add_body(wmo.Box((0.05, 0.5, 0.5)), position=(-3.0, 0.0, 0.0), kind="kinematic",
+                         linear_velocity=(100.0, 0.0, 0.0))
+        ball = w.add_body(wmo.Sphere(0.1), mass=0.1, ccd=ccd)
+        w.step(4)
+        if not ccd:
+            assert ball.position[0] == 0.0 and bat.position[0] > 3.0  # passed through it
+        else:
+            assert ball.linear_velocity[0] == pytest.approx(100.0, rel=1e-6)
+            assert ball.position[0] >= bat.position[0] + 0.05 + 0.1 - 0.1 * 0.05  # ahead of the bat
+
+
 # ---- a long thin rod spinning at 100 rad/s next to a wall ---------------------------
 
 def spinning_rod(ccd: bool):

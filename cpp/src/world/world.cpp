@@ -753,9 +753,11 @@ void World::run_step() {
     for (int i = 0; i < n; ++i) {
       if (!awake_[i]) continue;  // static or sleeping: the proxy stays where it is
       // The box swept by the step's predicted translation (speculative_motion, and all
-      // of it for a CCD body), so that the pairs of surfaces that can meet within the
-      // step are reported.
-      const Vec3 d = (ccd && ccd_[i] ? ccd_motion : motion) * linear_velocities_[i];
+      // of it for a CCD body, and for a kinematic body while CCD is active: its motion
+      // is known, and a fast one would otherwise jump over a resting CCD body), so that
+      // the pairs of surfaces that can meet within the step are reported.
+      const bool sweep_all = ccd && (ccd_[i] || kinds_[i] == BodyKind::kKinematic);
+      const Vec3 d = (sweep_all ? ccd_motion : motion) * linear_velocities_[i];
       Aabb box = shapes_[i]->world_aabb(Pose(positions_[i], orientations_[i])).fattened(spec);
       box.min += d.cwiseMin(Vec3::Zero());
       box.max += d.cwiseMax(Vec3::Zero());
@@ -1188,7 +1190,19 @@ int World::continuous_step() {
       if (awake_dynamic(j) && solver_saw(i, j)) return true;
       Motion mj;
       mj.start = Pose(positions_[j], orientations_[j]);
-      sweep_pair(sw, j, mj, 0, allowance);
+      Real reach_j = 0;
+      if (kinds_[j] == BodyKind::kKinematic) {
+        // A kinematic body's motion over the step is its velocity (the solver does not
+        // change it): swept along it, from where it started.
+        mj.linear_velocity = linear_velocities_[j];
+        mj.angular_velocity = angular_velocities_[j];
+        mj.center = masses_[j].local_com;
+        const Vec3 c_end = world_com(j);
+        mj.start.rotation = Motion{Pose(c_end, orientations_[j]), Vec3::Zero(), -mj.angular_velocity}.at(dt).rotation;
+        mj.start.position = c_end - dt * mj.linear_velocity - mj.start.rotation * mj.center;
+        reach_j = dt * (mj.linear_velocity.norm() + mj.angular_velocity.norm() * outer_radius_[j]);
+      }
+      sweep_pair(sw, j, mj, reach_j, allowance);
       return true;
     });
   }
@@ -1252,12 +1266,14 @@ int World::continuous_step() {
   for (const Sweep& sw : sweeps_) {
     if (!(sw.time < dt) || sw.hit_body < 0) continue;
     const int a = sw.body, b = sw.hit_body;
-    const bool b_moves = awake_dynamic(b);
+    const bool b_moves = awake_dynamic(b);  // takes an impulse (a kinematic one moves but does not)
     const Vec3& nrm = sw.hit_normal;
     const Vec3 ra = sw.hit_point - world_com(a);
     const Vec3 rb = sw.hit_point - world_com(b);
     const Vec3 va = linear_velocities_[a] + angular_velocities_[a].cross(ra);
-    const Vec3 vb = b_moves ? Vec3(linear_velocities_[b] + angular_velocities_[b].cross(rb)) : Vec3::Zero();
+    const Vec3 vb = b_moves || kinds_[b] == BodyKind::kKinematic
+                        ? Vec3(linear_velocities_[b] + angular_velocities_[b].cross(rb))
+                        : Vec3::Zero();
     const Real vn = nrm.dot(vb - va);  // < 0: approaching
     if (!(vn < 0)) continue;
     const Mat3 ia = world_inv_inertia(orientations_[a], masses_[a].inv_inertia_local);
