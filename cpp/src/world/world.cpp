@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <limits>
 
 namespace wmo {
 
@@ -334,6 +335,7 @@ void World::apply_force(BodyId id, const Vec3& force, const Vec3& world_point) {
   if (kinds_[i] != BodyKind::kDynamic) return;
   forces_[i] += force;
   torques_[i] += (world_point - world_com(i)).cross(force);
+  has_forces_ = true;
   wake_row(i);
 }
 
@@ -342,6 +344,7 @@ void World::apply_torque(BodyId id, const Vec3& torque) {
   require_finite("torque", torque);
   if (kinds_[i] != BodyKind::kDynamic) return;
   torques_[i] += torque;
+  has_forces_ = true;
   wake_row(i);
 }
 
@@ -385,18 +388,26 @@ bool World::moving(int i) const {
 // on the ground). Sleep timers advance for bodies below both thresholds and reset
 // otherwise (and for bodies touching a moving kinematic body); an island sleeps when
 // its smallest timer reaches time_to_sleep.
-void World::update_sleep() {
+int World::update_sleep() {
   const int n = body_count();
   const Real dt = settings_.dt;
   const Real lin2 = settings_.sleep_linear_threshold * settings_.sleep_linear_threshold;
   const Real ang2 = settings_.sleep_angular_threshold * settings_.sleep_angular_threshold;
-  island_parent_.resize(n);
+  int awake = 0;
+  bool ready = false;  // some body slow for time_to_sleep: else no island can sleep
   for (int i = 0; i < n; ++i) {
-    island_parent_[i] = i;
     if (!awake_dynamic(i)) continue;
+    ++awake;
     const bool slow = linear_velocities_[i].squaredNorm() <= lin2 && angular_velocities_[i].squaredNorm() <= ang2;
     sleep_time_[i] = slow ? sleep_time_[i] + dt : 0;
+    ready = ready || sleep_time_[i] >= settings_.time_to_sleep;
   }
+  // An island sleeps when its smallest timer reaches time_to_sleep (the contacts below
+  // only merge islands and reset timers): with no timer there, the islands need not be
+  // built (a scene in motion, such as free fall, pays only the loop above).
+  if (!ready) return awake;
+  island_parent_.resize(n);
+  for (int i = 0; i < n; ++i) island_parent_[i] = i;
   auto find = [&](int i) {
     while (island_parent_[i] != i) i = island_parent_[i] = island_parent_[island_parent_[i]];
     return i;
@@ -444,7 +455,9 @@ void World::update_sleep() {
     angular_velocities_[i].setZero();
     sleep_position_[i] = positions_[i];
     sleep_orientation_[i] = orientations_[i];
+    --awake;
   }
+  return awake;
 }
 
 void World::validate_state() {
@@ -893,12 +906,25 @@ void World::run_step() {
     std::array<BodyState, kFreeBlock> block;
     std::array<int, kFreeBlock> block_body{};
     int block_size = 0;
+    // The common free body (dynamic, gravity only: no force, damping, centre-of-mass
+    // offset or gyroscopic term) is integrated inline, as integrate_velocity and
+    // integrate_position would (the same operations in the same order): the calls cost
+    // 10,000 falling spheres a third of the stage.
+    constexpr std::uint8_t kNotPlain = kHasForce | kHasDamping | kComOffset | kGyroscopic | kInContact;
+    std::array<Real, kFreeBlock> block_hg{};  // h * gravity_scale of a plain body, NaN otherwise
     auto flush_block = [&] {
       for (int sub = 0; sub < substeps; ++sub)
         for (int j = 0; j < block_size; ++j) {
           const int i = block_body[j];
-          if (kinds_[i] == BodyKind::kDynamic) integrate_velocity(i, block[j], body_flags_[i], h);
-          integrate_position(i, block[j], body_flags_[i], h);
+          BodyState& st = block[j];
+          if (!std::isnan(block_hg[j])) {
+            st.v += block_hg[j] * settings_.gravity;
+            positions_[i] += h * st.v;
+            orientations_[i] = integrate_rotation(orientations_[i], st.w, h);
+            continue;
+          }
+          if (kinds_[i] == BodyKind::kDynamic) integrate_velocity(i, st, body_flags_[i], h);
+          integrate_position(i, st, body_flags_[i], h);
         }
       for (int j = 0; j < block_size; ++j) {
         const int i = block_body[j];
@@ -914,7 +940,7 @@ void World::run_step() {
       if (!awake_[i] && !in_contact) continue;  // static or sleeping, and in no row
       const bool dynamic = awake_dynamic(i);
       f |= traits_[i];
-      if (dynamic && (!forces_[i].isZero(0) || !torques_[i].isZero(0))) f |= kHasForce;
+      if (has_forces_ && dynamic && (!forces_[i].isZero(0) || !torques_[i].isZero(0))) f |= kHasForce;
       if (dynamic && settings_.gyroscopic && !(f & kIsotropic)) f |= kGyroscopic;
       // Working state. The world inverse inertia only where something reads it:
       // contact rows and torques.
@@ -934,6 +960,7 @@ void World::run_step() {
         if (awake_[i]) coupled_.push_back(i);
         continue;
       }
+      block_hg[block_size] = dynamic && !(f & kNotPlain) ? h * gravity_scale_[i] : std::numeric_limits<Real>::quiet_NaN();
       block_body[block_size++] = i;
       if (block_size == kFreeBlock) flush_block();
     }
@@ -1010,17 +1037,19 @@ void World::run_step() {
   }
   // Forces and torques act for one step (the ccd stage reads them to bound how far the
   // bodies it does not sweep may have moved).
-  for (int i = 0; i < n; ++i)
-    if (body_flags_[i] & kHasForce) {
-      forces_[i].setZero();
-      torques_[i].setZero();
-    }
+  if (has_forces_) {
+    for (int i = 0; i < n; ++i)
+      if (body_flags_[i] & kHasForce) {
+        forces_[i].setZero();
+        torques_[i].setZero();
+      }
+    has_forces_ = false;
+  }
   // ---- update_sleep ----
   {
     StageTimer t(profile_[kUpdateSleep]);
     if (settings_.enable_sleep) {
-      update_sleep();
-      t.set_count(awake_dynamic_count());
+      t.set_count(update_sleep());
     }
   }
   ++step_count_;

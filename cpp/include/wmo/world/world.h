@@ -370,7 +370,8 @@ class World {
   void validate_state();
   void wake_island(int island);
   void wake_row(int index);
-  void update_sleep();
+  /// The update_sleep stage; returns the awake dynamic bodies after it.
+  int update_sleep();
   bool moving(int i) const;
   /// A dynamic body that is awake: the only kind that integrates, joins islands and
   /// needs contacts.
@@ -389,6 +390,7 @@ class World {
   std::vector<std::shared_ptr<const Shape>> shapes_;
   std::vector<Real> frictions_, restitutions_, linear_damping_, angular_damping_, gravity_scale_;
   std::vector<Vec3> forces_, torques_;
+  bool has_forces_ = false;  ///< some apply_force / apply_torque since the last step
   std::vector<ProxyId> proxies_;
   std::vector<std::int32_t> slot_of_;  // dense row -> slot
   // Sleeping, per dense row: awake flag (see is_awake), time below the thresholds (s),
