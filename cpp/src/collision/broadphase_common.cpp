@@ -90,9 +90,7 @@ void Broadphase::move_proxy(ProxyId id, const Aabb& box, const Vec3& displacemen
   require_live("move_proxy", id);
   detail::require_valid_box("box", box);
   require_finite("displacement", displacement);
-  tight_[static_cast<std::size_t>(id)] = box;
-  dirty_ = true;
-  on_move(id, displacement);
+  move_proxy_unchecked(id, box, displacement);
 }
 
 void Broadphase::update() {

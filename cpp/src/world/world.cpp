@@ -774,7 +774,13 @@ void World::run_step() {
       Aabb box = shapes_[i]->world_aabb(Pose(positions_[i], orientations_[i])).fattened(spec);
       box.min += d.cwiseMin(Vec3::Zero());
       box.max += d.cwiseMax(Vec3::Zero());
-      broadphase_->move_proxy(proxies_[i], box, dt * linear_velocities_[i]);
+      // The proxy is the body's own and min <= max by construction; a non-finite box
+      // (a velocity blown up by a previous step of this call: step() validated the
+      // state it was given) is refused here, as move_proxy would, before the tree sees it.
+      if (!box.min.allFinite() || !box.max.allFinite())
+        throw InvalidArgument("body " + std::to_string(i) + " left the finite range (position " +
+                              to_string(positions_[i]) + ", velocity " + to_string(linear_velocities_[i]) + ")");
+      broadphase_->move_proxy_unchecked(proxies_[i], box, dt * linear_velocities_[i]);
       ++moved;
     }
     t.set_count(moved);

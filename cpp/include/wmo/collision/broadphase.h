@@ -150,6 +150,14 @@ class Broadphase {
   /// fat box ahead of the motion. It never changes which pairs are reported. Throws
   /// InvalidArgument on a bad id or box, or a non-finite displacement.
   void move_proxy(ProxyId id, const Aabb& box, const Vec3& displacement = Vec3::Zero());
+  /// move_proxy without its checks, for a caller that guarantees a live id, a finite
+  /// box with min <= max and a finite displacement (the world: its state is validated
+  /// at the start of World::step). A bad argument here is undefined behaviour.
+  void move_proxy_unchecked(ProxyId id, const Aabb& box, const Vec3& displacement) {
+    tight_[static_cast<std::size_t>(id)] = box;
+    dirty_ = true;
+    on_move(id, displacement);
+  }
 
   /// Finishes incremental work after a batch of create/destroy/move calls (re-sorting,
   /// candidate-pair update). query_pairs calls it itself when needed.
