@@ -1152,11 +1152,17 @@ int World::continuous_step() {
   auto allowance_of = [&](int i) { return std::max(settings_.ccd_penetration * inner_radius_[i], Real(1e-7)); };
   // Sweeps body a (sweep sa) against body b moving by mb over the step, whose points
   // move at most reach_b: a may make no overlap with b deeper than half its allowance,
-  // nor deepen one it starts with by more than a quarter of it. Records the earliest
-  // such time in sa (with b, the normal from a to b and the contact point).
-  auto sweep_pair = [&](Sweep& sa, int b, const Motion& mb, Real reach_b, Real allowance) {
+  // nor deepen one it starts with by more than a quarter of it. Returns the first time
+  // it would (hit false if never), the normal from a to b and the contact point.
+  struct PairHit {
+    bool hit = false;
+    Real time = 0;
+    Vec3 normal, point;
+  };
+  auto sweep_pair = [&](const Sweep& sa, int b, const Motion& mb, Real reach_b, Real allowance) {
+    PairHit h;
     const Real budget = 0.25 * allowance;
-    if (sa.reach + reach_b <= budget) return;  // cannot get that much closer in one step
+    if (sa.reach + reach_b <= budget) return h;  // cannot get that much closer in one step
     const int a = sa.body;
     ToiSettings st;
     st.tolerance = 0.5 * budget;
@@ -1168,11 +1174,22 @@ int World::continuous_step() {
       st.target_distance = r.distance - budget;
       r = time_of_impact(*shapes_[a], sa.motion, *shapes_[b], mb, dt, st);
     }
-    if (!r.hit || r.status == QueryStatus::kUnsupported || !(r.time < sa.time)) return;
-    sa.time = r.time;
-    sa.hit_body = b;
-    sa.hit_normal = r.normal;
-    sa.hit_point = 0.5 * (r.point_a + r.point_b);
+    if (!r.hit || r.status == QueryStatus::kUnsupported) return h;
+    h.hit = true;
+    h.time = r.time;
+    h.normal = r.normal;
+    h.point = 0.5 * (r.point_a + r.point_b);
+    return h;
+  };
+  // Keeps a hit with `other` if it is the sweep's earliest; `flip` for the sweep of the
+  // pair's second body (the normal points the other way). Returns whether it was kept.
+  auto record = [](Sweep& s, const PairHit& h, int other, bool flip) {
+    if (!h.hit || !(h.time < s.time)) return false;
+    s.time = h.time;
+    s.hit_body = other;
+    s.hit_normal = flip ? Vec3(-h.normal) : h.normal;
+    s.hit_point = h.point;
+    return true;
   };
   // Dynamic pairs the solver already saw (a contact constraint, speculative or not)
   // are left to it: clamping one body of a pile while its neighbours go on makes new
@@ -1206,14 +1223,10 @@ int World::continuous_step() {
       if (s2.box.min.x() > s1.box.max.x()) break;
       if (!s1.box.overlaps(s2.box) || solver_saw(s1.body, s2.body)) continue;
       sweep_pairs_.emplace_back(order[k], order[l]);
-      const Real before = s1.time;
-      sweep_pair(s1, s2.body, s2.motion, s2.reach, std::min(allowance_of(s1.body), allowance_of(s2.body)));
-      if (s1.time < before && s1.time < s2.time) {
-        s2.time = s1.time;
-        s2.hit_body = s1.body;
-        s2.hit_normal = -s1.hit_normal;
-        s2.hit_point = s1.hit_point;
-      }
+      const PairHit h =
+          sweep_pair(s1, s2.body, s2.motion, s2.reach, std::min(allowance_of(s1.body), allowance_of(s2.body)));
+      record(s1, h, s2.body, false);
+      record(s2, h, s1.body, true);
     }
   }
   // Each fast CCD body against everything else near its path: static, kinematic and
@@ -1241,7 +1254,7 @@ int World::continuous_step() {
         mj.start.position = c_end - dt * mj.linear_velocity - mj.start.rotation * mj.center;
         reach_j = dt * (mj.linear_velocity.norm() + mj.angular_velocity.norm() * outer_radius_[j]);
       }
-      sweep_pair(sw, j, mj, reach_j, allowance);
+      record(sw, sweep_pair(sw, j, mj, reach_j, allowance), j, false);
       return true;
     });
   }
@@ -1263,9 +1276,8 @@ int World::continuous_step() {
         if (!(now[other] < seen[other])) continue;  // the other was not put back last round
         Motion mo;
         mo.start = sweeps_[other].motion.at(now[other]);
-        const Real before = sweeps_[me].time;
-        sweep_pair(sweeps_[me], sweeps_[other].body, mo, 0, allowance_of(sweeps_[me].body));
-        changed = changed || sweeps_[me].time < before;
+        const PairHit h = sweep_pair(sweeps_[me], sweeps_[other].body, mo, 0, allowance_of(sweeps_[me].body));
+        changed = record(sweeps_[me], h, sweeps_[other].body, false) || changed;
       }
     }
     seen.swap(now);
