@@ -418,11 +418,11 @@ def test_fast_ccd_ball_wakes_and_pushes_a_sleeping_box():
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    "issue 4's bar, not met: boxes3000 with CCD on every box reaches 0.66 m (no CCD: 0.70 m; "
-    "bar 0.10 m). Its deep overlaps are not tunnelling but the soft contacts (30 Hz springs, one "
-    "Gauss-Seidel pass per substep) giving way under the falling columns' loads: 0.86 m even "
-    "with the narrowphase at 240 Hz, 0.13 m with 240 Hz springs at 960 Hz substeps. See the "
-    "issue's notes."))
+    "issue 4's bar, not met: boxes3000 with CCD on every box reaches 0.64-0.73 m (no CCD: "
+    "0.66-0.70 m; bar 0.10 m). Its deep overlaps are not tunnelling but the soft contacts (30 Hz "
+    "springs) giving way under the falling columns' loads on manifolds that go stale within a "
+    "step: 0.86 m even with the narrowphase at 240 Hz, 0.13 m with 240 Hz springs at 960 Hz "
+    "substeps (benchmarks/ccd/penetration.py). See the issue's notes."))
 def test_boxes3000_with_ccd_on_every_box_penetrates_at_most_5_percent():
     w = wmo.scenes.boxes3000(sleeping=False)
     for i in range(w.body_count):
