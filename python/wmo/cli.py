@@ -3,6 +3,17 @@
     wmo bench SCENE [--steps 600] [--engines wmo,pybullet,mujoco] [--out DIR]
                     [--iterations 10] [--substeps 4] [--dt 1/60] [--repeats 1] [--sleeping]
 
+    wmo serve [--host 127.0.0.1] [--port 8765] [--token T | --token-file F] [--data DIR]
+              [--rate 60] [--scene NAME=BASE ...] [--no-persist]
+
+    wmo experiment latency [--delays 0,20,40,100] [--seconds 10] [--presets lossy,mobile]
+                           [--weak] [--mode compressed|full] [--clients 1] [--out DIR]
+
+``serve`` runs a WMO server (PROTOCOL.md) until Ctrl-C: each scene simulates at
+``--rate`` steps per second on its own thread and clients connect with
+``wmo.remote.connect("ws://HOST:PORT", scene=NAME)``. Scenes and their edits are journaled
+in ``--data`` (default ``wmo-server-data``) and restored from there on the next start.
+
 ``bench`` steps a canonical scene (boxes3000 or pyramid, shared/SCENES.md) in WMO and in
 its peers in the same run, prints a summary with the ratios, and writes
 ``DIR/SCENE_steps.csv`` (one row per engine and step: time, contact points, awake
@@ -52,7 +63,32 @@ def main(argv: list[str] | None = None) -> int:
                         "to the centimetre with --substeps 6 --contact-hertz 38")
     b.add_argument("--memory", action="store_true",
                    help="also measure each engine's peak memory, in a fresh process each (Linux)")
+    sv = sub.add_parser("serve", help="run a server that simulates scenes for remote clients")
+    sv.add_argument("--host", default="127.0.0.1", help="address to listen on (default loopback)")
+    sv.add_argument("--port", type=int, default=8765)
+    sv.add_argument("--token", default=None, help="clients must present this token (default: none on "
+                    "loopback, a random one printed at start on any other address)")
+    sv.add_argument("--token-file", type=Path, default=None, help="read the token from this file")
+    sv.add_argument("--data", type=Path, default=Path("wmo-server-data"),
+                    help="folder where scenes are journaled and restored from (default wmo-server-data)")
+    sv.add_argument("--no-persist", action="store_true", help="keep scenes in memory only")
+    sv.add_argument("--rate", type=float, default=60.0, help="simulation steps per second per scene")
+    sv.add_argument("--scene", action="append", default=[], metavar="NAME=BASE",
+                    help="host scene NAME, started as BASE (empty, boxes3000, pyramid, tower); repeatable; "
+                         "default: default=empty")
+    sv.add_argument("--checkpoint-interval", type=float, default=30.0, help="seconds between checkpoints")
+    ex = sub.add_parser("experiment", help="the thesis's experiments on a local server (see wmo.remote.experiment)",
+                        add_help=False)
+    ex.add_argument("which", choices=["latency"])
+    ex.add_argument("rest", nargs=argparse.REMAINDER)
     args = ap.parse_args(argv)
+
+    if args.command == "experiment":
+        from .remote import experiment
+
+        return experiment.main(args.rest)
+    if args.command == "serve":
+        return _serve(args)
 
     if args.command == "bench":
         engines = [e for e in args.engines.split(",") if e]
@@ -87,3 +123,36 @@ def main(argv: list[str] | None = None) -> int:
             print(f"wrote {p}")
         return 0
     return 2
+
+
+def _serve(args) -> int:
+    import logging
+
+    from .remote.server import Server
+
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    scenes = {}
+    for item in args.scene:
+        name, sep, base = item.partition("=")
+        if not sep:
+            print(f"wmo serve: --scene wants NAME=BASE, got {item!r}", file=sys.stderr)
+            return 2
+        scenes[name] = base
+    token = args.token
+    if args.token_file is not None:
+        try:
+            token = args.token_file.read_text().strip()
+        except OSError as e:
+            print(f"wmo serve: cannot read --token-file {args.token_file}: {e}", file=sys.stderr)
+            return 2
+    try:
+        server = Server(args.host, args.port, token=token, data_dir=None if args.no_persist else args.data,
+                        scenes=scenes or None, rate=args.rate, checkpoint_interval=args.checkpoint_interval)
+    except ValueError as e:
+        print(f"wmo serve: {e}", file=sys.stderr)
+        return 2
+    print(f"wmo serve: scenes {', '.join(scenes or ['default'])} at ws://{args.host}:{args.port} "
+          f"({'journaled in ' + str(args.data) if not args.no_persist else 'in memory'}); Ctrl-C stops",
+          flush=True)
+    server.serve_forever()
+    return 0

@@ -1,0 +1,261 @@
+"""The thesis's latency experiment, done properly: `wmo experiment latency`.
+
+A server (its own process, optionally limited to one core: the "weak server") simulates
+``boxes3000`` at 60 Hz; a client (this process) watches it through the latency proxy
+(another process, :mod:`wmo.remote.proxy`) at each added latency in turn. For every
+snapshot received it records the server's capture time and the receipt time (one
+machine, one clock: the end-to-end delay), the frame's size; twice a second it asks the
+server for its simulation rate. Output: ``latency.csv`` (one row per snapshot),
+``latency_summary.csv`` (one row per run) and plots of the simulation rate, the
+client's snapshot rate, the delay and the bandwidth over time, one line per latency,
+like the thesis's figures 28-34.
+
+The thesis's prototype lost about 25% of its frame rate at 20-40 ms because its
+simulation waited on the network; here the simulation runs on its own thread and the
+scene's rate must not depend on the latency.
+"""
+from __future__ import annotations
+
+import csv
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["Run", "run_latency_experiment", "main"]
+
+
+@dataclass
+class Run:
+    """One run: a latency setting and what the client measured."""
+    label: str
+    delay_ms: float
+    jitter_ms: float = 0.0
+    loss: float = 0.0
+    mode: str = "compressed"
+    clients: int = 1
+    receipt: list = field(default_factory=list)     # client receipt time, s since the run began
+    capture: list = field(default_factory=list)     # server capture time, same clock
+    nbytes: list = field(default_factory=list)      # frame bytes
+    step: list = field(default_factory=list)
+    rate_t: list = field(default_factory=list)      # times of the server's rate readings
+    rate: list = field(default_factory=list)        # server steps per second
+
+    def summary(self) -> dict:
+        r = np.asarray(self.receipt)
+        dur = r[-1] - r[0] if len(r) > 1 else float("nan")
+        delay = (np.asarray(self.receipt) - np.asarray(self.capture)) * 1000
+        bits = 8 * float(np.sum(self.nbytes[1:])) if len(self.nbytes) > 1 else float("nan")
+        rates = np.asarray(self.rate[1:] or [float("nan")])
+        return {"label": self.label, "delay_ms": self.delay_ms, "jitter_ms": self.jitter_ms, "loss": self.loss,
+                "mode": self.mode, "clients": self.clients,
+                "server_steps_per_s": float(np.median(rates)),
+                "client_snapshots_per_s": (len(r) - 1) / dur if len(r) > 1 else float("nan"),
+                "delay_median_ms": float(np.median(delay)) if len(delay) else float("nan"),
+                "delay_p95_ms": float(np.percentile(delay, 95)) if len(delay) else float("nan"),
+                "mbit_per_s": bits / dur / 1e6 if len(r) > 1 else float("nan"),
+                "bytes_per_snapshot": float(np.mean(self.nbytes)) if self.nbytes else float("nan"),
+                "snapshots": len(r)}
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _wait_port(port: int, proc: subprocess.Popen, timeout: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=0.5):
+                return
+        except OSError:
+            if proc.poll() is not None:
+                raise RuntimeError(f"process exited: {proc.args}")
+            time.sleep(0.05)
+    raise RuntimeError(f"nothing listens on port {port} after {timeout} s")
+
+
+def _spawn(args: list[str], weak: bool = False) -> subprocess.Popen:
+    cmd = [sys.executable, *args]
+    if weak:
+        if shutil.which("taskset"):
+            cmd = ["taskset", "-c", "0", *cmd]
+        else:
+            print("note: taskset not found; the weak-server run is not limited to one core", file=sys.stderr)
+    return subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+def _measure(url: str, run: Run, seconds: float, scene: str) -> None:
+    from .client import connect
+
+    watchers = [connect(url, scene=scene, mode=run.mode) for _ in range(run.clients)]
+    c = watchers[0]
+    t0 = time.time()
+
+    def record(snap, nbytes: int, receipt: float) -> None:  # on the client's reader thread
+        run.receipt.append(receipt - t0)
+        run.capture.append(snap.wall_time - t0)
+        run.nbytes.append(nbytes)
+        run.step.append(snap.step)
+
+    try:
+        c.on_snapshot(record)
+        while time.time() - t0 < seconds:
+            st = c.stats()
+            run.rate_t.append(time.time() - t0)
+            run.rate.append(st["steps_per_second"])
+            time.sleep(0.5)
+        c.on_snapshot(None)
+    finally:
+        for w in watchers:
+            w.close()
+
+
+def run_latency_experiment(out: Path, delays_ms=(0, 20, 40, 100), seconds: float = 10.0, scene_base: str = "boxes3000",
+                           presets: tuple[str, ...] = (), weak: bool = False, mode: str = "compressed",
+                           clients: int = 1, rate: float = 60.0, warmup: float = 2.0) -> list[Run]:
+    """Runs the experiment; writes CSVs and plots to `out`; returns the runs."""
+    from .proxy import PRESETS
+
+    out.mkdir(parents=True, exist_ok=True)
+    runs: list[Run] = []
+    settings = [(f"{d:g} ms", {"delay": d / 1000.0}) for d in delays_ms]
+    settings += [(p, PRESETS[p]) for p in presets]
+    with tempfile.TemporaryDirectory() as tmp:
+        sport = _free_port()
+        server = _spawn(["-m", "wmo", "serve", "--port", str(sport), "--no-persist", "--rate", str(rate),
+                         "--scene", f"exp={scene_base}"], weak=weak)
+        try:
+            _wait_port(sport, server)
+            from .client import connect
+
+            for label, preset in settings:
+                # Each run starts from the scene as loaded, so runs see the same motion.
+                with connect(f"ws://127.0.0.1:{sport}", scene="exp") as ctl:
+                    ctl.load_scene(scene_base, sleeping=False)
+                pport = _free_port()
+                pargs = ["-m", "wmo.remote.proxy", "--target", f"127.0.0.1:{sport}", "--listen", f"127.0.0.1:{pport}"]
+                for k in ("delay", "jitter"):
+                    if preset.get(k):
+                        pargs += [f"--{k}", f"{preset[k]}"]
+                if preset.get("loss"):
+                    pargs += ["--loss", f"{preset['loss']}"]
+                if preset.get("bandwidth"):
+                    pargs += ["--bandwidth", f"{preset['bandwidth']}"]
+                proxy = _spawn(pargs)
+                try:
+                    _wait_port(pport, proxy)
+                    run = Run(label, 1000 * preset.get("delay", 0.0), 1000 * preset.get("jitter", 0.0),
+                              preset.get("loss", 0.0), mode, clients)
+                    time.sleep(warmup if runs else 0.0)
+                    _measure(f"ws://127.0.0.1:{pport}", run, seconds, "exp")
+                    runs.append(run)
+                    s = run.summary()
+                    print(f"{label:>10}: server {s['server_steps_per_s']:.1f} steps/s, client "
+                          f"{s['client_snapshots_per_s']:.1f} snapshots/s, delay median {s['delay_median_ms']:.1f} ms "
+                          f"(p95 {s['delay_p95_ms']:.1f}), {s['mbit_per_s']:.3f} Mbit/s, "
+                          f"{s['bytes_per_snapshot']:.0f} B/snapshot", flush=True)
+                finally:
+                    proxy.terminate()
+                    proxy.wait(10)
+        finally:
+            server.terminate()
+            try:
+                server.wait(20)
+            except subprocess.TimeoutExpired:
+                server.kill()
+    write_csv(runs, out)
+    plot(runs, out)
+    return runs
+
+
+def write_csv(runs: list[Run], out: Path) -> None:
+    with open(out / "latency.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["run", "delay_ms", "receipt_s", "capture_s", "end_to_end_ms", "bytes", "step"])
+        for r in runs:
+            for t, c, b, s in zip(r.receipt, r.capture, r.nbytes, r.step):
+                w.writerow([r.label, r.delay_ms, f"{t:.6f}", f"{c:.6f}", f"{1000 * (t - c):.3f}", b, s])
+    with open(out / "latency_summary.csv", "w", newline="") as f:
+        rows = [r.summary() for r in runs]
+        if rows:
+            w = csv.DictWriter(f, fieldnames=list(rows[0]))
+            w.writeheader()
+            w.writerows(rows)
+
+
+def plot(runs: list[Run], out: Path) -> list[Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(2, 2, figsize=(12, 8))
+    for r in runs:
+        t = np.asarray(r.receipt)
+        if len(t) < 3:
+            continue
+        ax[0, 0].plot(r.rate_t[1:], r.rate[1:], label=r.label)
+        # Client snapshot rate over 1 s windows.
+        edges = np.arange(0, t[-1] + 1, 1.0)
+        counts, _ = np.histogram(t, edges)
+        ax[0, 1].step(edges[1:], counts, where="post", label=r.label)
+        ax[1, 0].plot(t, 1000 * (t - np.asarray(r.capture)), lw=0.7, label=r.label)
+        bits, _ = np.histogram(t, edges, weights=8 * np.asarray(r.nbytes, dtype=float))
+        ax[1, 1].step(edges[1:], bits / 1e6, where="post", label=r.label)
+    titles = [("server simulation rate", "steps / s"), ("client snapshot rate", "snapshots / s"),
+              ("end-to-end delay (capture to receipt)", "ms"), ("bandwidth to the client", "Mbit / s")]
+    for a, (title, unit) in zip(ax.ravel(), titles):
+        a.set_title(title)
+        a.set_xlabel("time (s)")
+        a.set_ylabel(unit)
+        a.grid(alpha=0.3)
+        a.legend(fontsize=8)
+    fig.suptitle("boxes3000 on a WMO server, one client behind the latency proxy")
+    fig.tight_layout()
+    path = out / "latency.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return [path]
+
+
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+
+    ap = argparse.ArgumentParser(prog="wmo experiment latency", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", type=Path, default=Path("results/latency"))
+    ap.add_argument("--delays", default="0,20,40,100", help="added one-way latencies, ms (comma-separated)")
+    ap.add_argument("--presets", default="", help="proxy presets too (e.g. lossy,mobile)")
+    ap.add_argument("--seconds", type=float, default=10.0, help="seconds per run")
+    ap.add_argument("--weak", action="store_true", help="limit the server to one core (taskset)")
+    ap.add_argument("--mode", choices=("compressed", "full"), default="compressed")
+    ap.add_argument("--clients", type=int, default=1, help="clients watching (all behind the proxy)")
+    ap.add_argument("--scene", default="boxes3000", help="empty, boxes3000, pyramid or tower")
+    args = ap.parse_args(argv)
+    try:
+        delays = [float(x) for x in args.delays.split(",") if x]
+    except ValueError:
+        print(f"wmo experiment latency: --delays must be numbers in ms, got {args.delays!r}", file=sys.stderr)
+        return 2
+    if any(d < 0 for d in delays) or args.seconds <= 0 or args.clients < 1:
+        print("wmo experiment latency: delays >= 0, seconds > 0 and clients >= 1 please", file=sys.stderr)
+        return 2
+    presets = tuple(p for p in args.presets.split(",") if p)
+    from .proxy import PRESETS
+
+    bad = [p for p in presets if p not in PRESETS]
+    if bad:
+        print(f"wmo experiment latency: unknown preset {bad[0]!r} (known: {', '.join(PRESETS)})", file=sys.stderr)
+        return 2
+    run_latency_experiment(args.out, delays, args.seconds, args.scene, presets, args.weak, args.mode, args.clients)
+    print(f"wrote {args.out / 'latency.csv'}, {args.out / 'latency_summary.csv'}, {args.out / 'latency.png'}")
+    return 0
