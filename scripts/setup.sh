@@ -7,7 +7,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-APT_PACKAGES=(g++ make pkg-config python3-venv libeigen3-dev libccd-dev libfcl-dev libgtest-dev)
+APT_PACKAGES=(g++ make pkg-config python3-venv libeigen3-dev libccd-dev libfcl-dev libgtest-dev chromium)
 missing=()
 for p in "${APT_PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
