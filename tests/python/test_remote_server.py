@@ -522,7 +522,8 @@ def test_sigkill_mid_edit_loses_no_acknowledged_edit(tmp_path):
         c.close()
         assert len(acked) + len(removed) > 20
         proc = _start_server_process(port, data)
-        c2 = connect(f"ws://127.0.0.1:{port}", scene="lab", mode="full")
+        c2 = c
+        c2.reconnect()  # the same client object: a full description and a key frame
         assert c2.paused
         # An edit applied but not yet acknowledged may or may not have survived.
         kind, in_rid, in_pos = inflight[0] or (None, None, None)
@@ -541,3 +542,23 @@ def test_sigkill_mid_edit_loses_no_acknowledged_edit(tmp_path):
     finally:
         proc.kill()
         proc.wait(10)
+
+
+def test_rate_limit_answers_and_keeps_the_connection(tmp_path):
+    srv = Server(port=0, scenes={"lab": "empty"}, limits=ServerLimits(rate=200.0, burst=20.0)).start()
+    try:
+        with connect(srv.url, scene="lab") as c:
+            futures = [c.set_settings(wait=False, dt=1 / 60) for _ in range(60)]
+            codes = []
+            for f in futures:
+                try:
+                    f.result(30)
+                    codes.append("ok")
+                except RemoteError as e:
+                    codes.append(e.code)
+            # A burst of 20 (snapshot acks count too, 60 a second): about 20 pass at once.
+            assert codes.count("ok") >= 10 and "rate_limited" in codes
+            time.sleep(0.5)  # the bucket refills at 200 per second
+            assert c.add_body(BOX, position=(0, 3, 0)) == 2
+    finally:
+        srv.stop()
