@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs everything WMO needs on a fresh Debian machine (run as root, or with sudo):
-# Debian packages (compiler, Eigen, libccd, FCL, GoogleTest), a virtual environment in
+# Debian packages (compiler, Eigen, libccd, FCL, GoogleTest, and Chromium for the browser
+# view's headless test), a virtual environment in
 # .venv with the Python packages from PyPI, and WMO itself as an editable install whose
 # build directory (build/py) also holds the C++ tests and benchmarks.
 # Idempotent: a second run only rebuilds what changed.

@@ -122,8 +122,11 @@ def _measure(url: str, run: Run, seconds: float, scene: str) -> None:
 
 def run_latency_experiment(out: Path, delays_ms=(0, 20, 40, 100), seconds: float = 10.0, scene_base: str = "boxes3000",
                            presets: tuple[str, ...] = (), weak: bool = False, mode: str = "compressed",
-                           clients: int = 1, rate: float = 60.0, warmup: float = 2.0) -> list[Run]:
-    """Runs the experiment; writes CSVs and plots to `out`; returns the runs."""
+                           clients: int = 1, rate: float = 60.0, warmup: float = 2.0,
+                           view_port: int | None = None) -> list[Run]:
+    """Runs the experiment; writes CSVs and plots to `out`; returns the runs. With
+    `view_port`, a browser view of the scene (wmo.remote.viewer, its own process) serves
+    http://127.0.0.1:view_port while it runs."""
     from .proxy import PRESETS
 
     out.mkdir(parents=True, exist_ok=True)
@@ -134,9 +137,16 @@ def run_latency_experiment(out: Path, delays_ms=(0, 20, 40, 100), seconds: float
         sport = _free_port()
         server = _spawn(["-m", "wmo", "serve", "--port", str(sport), "--no-persist", "--rate", str(rate),
                          "--scene", f"exp={scene_base}"], weak=weak)
+        viewer = None
         try:
             _wait_port(sport, server)
             from .client import connect
+
+            if view_port is not None:
+                viewer = _spawn(["-m", "wmo.remote.viewer", f"ws://127.0.0.1:{sport}", "--scene", "exp",
+                                 "--port", str(view_port)])
+                _wait_port(view_port, viewer)
+                print(f"browser view: http://127.0.0.1:{view_port} (live while the experiment runs)", flush=True)
 
             for label, preset in settings:
                 # Each run starts from the scene as loaded, so runs see the same motion.
@@ -168,6 +178,9 @@ def run_latency_experiment(out: Path, delays_ms=(0, 20, 40, 100), seconds: float
                     proxy.terminate()
                     proxy.wait(10)
         finally:
+            if viewer is not None:
+                viewer.terminate()
+                viewer.wait(10)
             server.terminate()
             try:
                 server.wait(20)
@@ -240,6 +253,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--mode", choices=("compressed", "full"), default="compressed")
     ap.add_argument("--clients", type=int, default=1, help="clients watching (all behind the proxy)")
     ap.add_argument("--scene", default="boxes3000", help="empty, boxes3000, pyramid or tower")
+    ap.add_argument("--view", type=int, default=None, metavar="PORT",
+                    help="also serve a browser view of the scene on this port (viser)")
     args = ap.parse_args(argv)
     try:
         delays = [float(x) for x in args.delays.split(",") if x]
@@ -256,6 +271,7 @@ def main(argv: list[str] | None = None) -> int:
     if bad:
         print(f"wmo experiment latency: unknown preset {bad[0]!r} (known: {', '.join(PRESETS)})", file=sys.stderr)
         return 2
-    run_latency_experiment(args.out, delays, args.seconds, args.scene, presets, args.weak, args.mode, args.clients)
+    run_latency_experiment(args.out, delays, args.seconds, args.scene, presets, args.weak, args.mode, args.clients,
+                           view_port=args.view)
     print(f"wrote {args.out / 'latency.csv'}, {args.out / 'latency_summary.csv'}, {args.out / 'latency.png'}")
     return 0
