@@ -562,3 +562,39 @@ def test_rate_limit_answers_and_keeps_the_connection(tmp_path):
             assert c.add_body(BOX, position=(0, 3, 0)) == 2
     finally:
         srv.stop()
+
+
+def test_a_client_that_does_not_acknowledge_gets_at_most_the_window(tmp_path):
+    # At most max_unacked_snapshots beyond the newest ack: over a slow link the server
+    # then sends the newest snapshot once the link has room, instead of queueing stale
+    # ones in the socket (the mobile preset measured 3.5 s of delay without the window).
+    from websockets.sync.client import connect as ws_connect
+
+    from wmo.remote.snapshot import SnapshotDecoder
+
+    srv = Server(port=0, scenes={"lab": "tower"}, rate=120.0,
+                 limits=ServerLimits(max_unacked_snapshots=10)).start()
+    try:
+        ws = ws_connect(srv.url, max_size=None).__enter__()
+        ws.send(msgpack.packb({"t": "hello", "v": 1, "scene": "lab"}))
+        dec = SnapshotDecoder()
+
+        def frames(seconds: float) -> list:
+            out, end = [], time.monotonic() + seconds
+            while time.monotonic() < end:
+                try:
+                    raw = ws.recv(timeout=max(0.01, end - time.monotonic()))
+                except TimeoutError:
+                    break
+                if raw[:2] == b"WS":
+                    out.append(dec.decode(raw))
+            return out
+
+        first = frames(1.0)  # 120 ticks happen; 10 are sent
+        assert len(first) == 10
+        ws.send(msgpack.packb({"t": "ack", "snap": first[-1].seq}))
+        more = frames(1.0)
+        assert len(more) == 10 and more[0].seq > first[-1].seq + 50  # the newest, not the next
+        ws.close()
+    finally:
+        srv.stop()

@@ -371,6 +371,10 @@ class RemoteScene(_SceneApi, _StateViews):
             err = ConnectionError(f"connection closed: {e}")
         except Exception as e:  # a frame the client cannot read: report it to waiters
             err = e
+        else:  # closed without an exception: say how, if the close frame told
+            code = getattr(self._ws, "close_code", None)
+            if code is not None:
+                err = ConnectionError(f"connection closed: code {code} ({getattr(self._ws, 'close_reason', '')})")
         finally:
             with self._cond:
                 self._closed = True
