@@ -94,11 +94,37 @@ def _spawn(args: list[str], weak: bool = False) -> subprocess.Popen:
     return subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
 
+def _light_watchers(url: str, scene: str, n: int) -> None:
+    """n clients in one asyncio loop that receive every snapshot and acknowledge it from
+    its header alone (no decoding): the load of n viewers on the server, without this
+    machine's cores spent decoding for them. Runs until killed."""
+    import asyncio
+
+    import msgpack
+    from websockets.asyncio.client import connect as ws_connect
+
+    from .snapshot import frame_info
+
+    async def one() -> None:
+        async with ws_connect(url, max_size=None, compression=None) as ws:
+            await ws.send(msgpack.packb({"t": "hello", "v": 1, "scene": scene, "mode": "compressed"}))
+            async for raw in ws:
+                if raw[:2] == b"WS":
+                    await ws.send(msgpack.packb({"t": "ack", "snap": frame_info(raw)["seq"]}))
+
+    async def main() -> None:
+        await asyncio.gather(*(one() for _ in range(n)))
+
+    asyncio.run(main())
+
+
 def _measure(url: str, run: Run, seconds: float, scene: str) -> None:
     from .client import connect
 
-    watchers = [connect(url, scene=scene, mode=run.mode) for _ in range(run.clients)]
-    c = watchers[0]
+    # The other clients watch from another process (see _light_watchers).
+    others = _spawn(["-c", f"from wmo.remote.experiment import _light_watchers; "
+                           f"_light_watchers({url!r}, {scene!r}, {run.clients - 1})"]) if run.clients > 1 else None
+    c = connect(url, scene=scene, mode=run.mode)
     t0 = time.time()
 
     def record(snap, nbytes: int, receipt: float) -> None:  # on the client's reader thread
@@ -108,6 +134,11 @@ def _measure(url: str, run: Run, seconds: float, scene: str) -> None:
         run.step.append(snap.step)
 
     try:
+        if others is not None:
+            deadline = time.monotonic() + 30
+            while c.stats()["clients"] < run.clients and time.monotonic() < deadline:
+                time.sleep(0.1)
+            t0 = time.time()
         c.on_snapshot(record)
         while time.time() - t0 < seconds:
             st = c.stats()
@@ -116,8 +147,10 @@ def _measure(url: str, run: Run, seconds: float, scene: str) -> None:
             time.sleep(0.5)
         c.on_snapshot(None)
     finally:
-        for w in watchers:
-            w.close()
+        c.close()
+        if others is not None:
+            others.terminate()
+            others.wait(10)
 
 
 def run_latency_experiment(out: Path, delays_ms=(0, 20, 40, 100), seconds: float = 10.0, scene_base: str = "boxes3000",
