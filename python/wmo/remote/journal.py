@@ -61,10 +61,12 @@ class SceneStore:
         self._journal = None
         self.records_since_checkpoint = 0
 
-    def load(self) -> tuple[dict | None, list[dict]]:
+    def load(self, repair: bool = True) -> tuple[dict | None, list[dict]]:
         """The last checkpoint (None if there is none) and the journal's complete records
-        with a sequence number above the checkpoint's, in order. Cuts a torn tail off
-        the journal file so that appends continue after the last good record."""
+        with a sequence number above the checkpoint's, in order. With `repair` (the
+        server, at start) cuts a torn tail off the journal file so that appends continue
+        after the last good record; without it the files are only read (safe while a
+        server is appending)."""
         doc = None
         if self.checkpoint_path.exists():
             try:
@@ -91,7 +93,7 @@ class SceneStore:
                 pos = good = end
                 if rec["seq"] > base:
                     records.append(rec)
-            if good < len(data):
+            if repair and good < len(data):
                 with open(self.journal_path, "r+b") as f:
                     f.truncate(good)
                     f.flush()
