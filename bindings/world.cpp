@@ -116,6 +116,14 @@ the world's state arrays (it changes when another body is removed).
           [](const PyBody& b, bool on) { world_of(b).set_ccd(b.id, on); },
           "Continuous collision detection for this body (dynamic bodies only; the World's "
           "``ccd`` switch must be on too): it never passes through anything.")
+      .def_property(
+          "collision_group",
+          [](const PyBody& b) {
+            World& w = world_of(b);
+            return w.collision_group(w.index_of(b.id));
+          },
+          [](const PyBody& b, int g) { world_of(b).set_collision_group(b.id, g); },
+          "Collision group, 0..63 (see World.set_group_collision).")
       .def_property_readonly(
           "sleeping",
           [](const PyBody& b) {
@@ -249,7 +257,7 @@ are zero-copy, writable views; see the module notes on their lifetime.
           [](py::object self, std::shared_ptr<Shape> shape, py::object position, py::object orientation,
              const std::string& kind, py::object mass, double density, double friction, double restitution,
              py::object linear_velocity, py::object angular_velocity, double linear_damping, double angular_damping,
-             double gravity_scale, bool ccd) {
+             double gravity_scale, bool ccd, int collision_group) {
             World& w = self.cast<World&>();
             BodyDef d;
             d.shape = std::move(shape);
@@ -266,20 +274,45 @@ are zero-copy, writable views; see the module notes on their lifetime.
             d.angular_damping = angular_damping;
             d.gravity_scale = gravity_scale;
             d.ccd = ccd;
+            d.collision_group = collision_group;
             return PyBody{self, w.add_body(d)};
           },
           py::arg("shape"), py::arg("position") = py::none(), py::arg("orientation") = py::none(),
           py::arg("kind") = "dynamic", py::arg("mass") = py::none(), py::arg("density") = 1000.0,
           py::arg("friction") = 0.5, py::arg("restitution") = 0.0, py::arg("linear_velocity") = py::none(),
           py::arg("angular_velocity") = py::none(), py::arg("linear_damping") = 0.0, py::arg("angular_damping") = 0.0,
-          py::arg("gravity_scale") = 1.0, py::arg("ccd") = false, R"doc(
+          py::arg("gravity_scale") = 1.0, py::arg("ccd") = false, py::arg("collision_group") = 0, R"doc(
 Adds a body and returns its Body handle. ``kind`` is 'dynamic' (default), 'static' or
 'kinematic'. ``mass`` (kg) overrides ``density`` (kg/m^3); the inertia follows the shape.
 Position (m) and orientation (x, y, z, w) place the shape's frame; velocities are of
 the centre of mass (m/s, rad/s, world frame). ``ccd=True`` turns on continuous
-collision detection for a dynamic body (see World). Bad values raise ValueError naming
-the field; the world is unchanged. Existing state views may detach (see World).
+collision detection for a dynamic body (see World). ``collision_group`` (0..63) is the
+body's group for World.set_group_collision. Bad values raise ValueError naming the
+field; the world is unchanged. Existing state views may detach (see World).
 )doc")
+      .def(
+          "set_group_collision",
+          [](World& w, int a, int b, bool enabled) { w.set_group_collision(a, b, enabled); }, py::arg("group_a"),
+          py::arg("group_b"), py::arg("enabled"),
+          "Whether bodies of collision groups group_a and group_b (0..63) collide (symmetric; "
+          "all pairs of groups collide by default). A filtered pair gets no contact and no "
+          "CCD sweep; filters cost nothing while none is set.")
+      .def("group_collision", &World::group_collision, py::arg("group_a"), py::arg("group_b"),
+           "True if bodies of the two groups collide.")
+      .def(
+          "set_pair_collision",
+          [](World& w, const PyBody& a, const PyBody& b, bool enabled) {
+            if (&a.world.cast<World&>() != &w || &b.world.cast<World&>() != &w)
+              throw InvalidArgument("set_pair_collision: both bodies must belong to this world");
+            w.set_pair_collision(a.id, b.id, enabled);
+          },
+          py::arg("body_a"), py::arg("body_b"), py::arg("enabled"),
+          "Whether two bodies may collide (False filters the pair until enabled again or one "
+          "of them is removed): UsdPhysics' FilteredPairsAPI.")
+      .def(
+          "pair_collision",
+          [](World& w, const PyBody& a, const PyBody& b) { return w.pair_collision(a.id, b.id); },
+          py::arg("body_a"), py::arg("body_b"), "False if the pair is filtered.")
       .def(
           "remove_body",
           [](World& w, const PyBody& b) {

@@ -255,3 +255,67 @@ def test_bad_sleep_settings_raise():
         wmo.World(time_to_sleep=0.0)
     with pytest.raises(ValueError, match="sleep_linear_threshold"):
         wmo.World(sleep_linear_threshold=-1.0)
+
+
+# ---- collision filtering (issue 6: UsdPhysics FilteredPairsAPI and CollisionGroup) ----
+
+def _two_stacked_boxes(**kw_upper):
+    w = wmo.World(sleeping=False)
+    w.add_body(wmo.Box((10, 0.5, 10)), position=(0, -0.5, 0), kind="static")
+    lower = w.add_body(wmo.Box((0.5, 0.5, 0.5)), position=(0, 2, 0))
+    upper = w.add_body(wmo.Box((0.5, 0.5, 0.5)), position=(0, 4, 0), **kw_upper)
+    return w, lower, upper
+
+
+def test_a_filtered_pair_passes_through_and_lands_on_the_ground():
+    # Unfiltered, the upper box comes to rest on the lower one (centre at 1.5); filtered,
+    # both rest on the ground (centres at 0.5, side by side in space: overlapping).
+    w, lower, upper = _two_stacked_boxes()
+    w.step(180)
+    assert abs(upper.position[1] - 1.5) < 0.02
+    w, lower, upper = _two_stacked_boxes()
+    w.set_pair_collision(lower, upper, False)
+    assert not w.pair_collision(upper, lower)
+    w.step(180)
+    assert abs(upper.position[1] - 0.5) < 0.02 and abs(lower.position[1] - 0.5) < 0.02
+    assert all(set(p) != {1, 2} for p in w.contacts["bodies"].tolist())
+
+
+def test_groups_filter_symmetrically_and_can_be_enabled_again():
+    w, lower, upper = _two_stacked_boxes(collision_group=7)
+    lower.collision_group = 2
+    w.set_group_collision(7, 2, False)
+    assert not w.group_collision(2, 7) and w.group_collision(2, 2) and w.group_collision(7, 0)
+    w.step(180)
+    assert abs(upper.position[1] - 0.5) < 0.02
+    # Enabled again, the overlapping boxes collide (and push apart).
+    w.set_group_collision(2, 7, True)
+    w.step(60)
+    assert np.linalg.norm(upper.position - lower.position) > 0.9
+
+
+def test_a_filter_is_forgotten_with_its_body():
+    # A later body in the removed body's slot must start unfiltered.
+    w, lower, upper = _two_stacked_boxes()
+    w.set_pair_collision(lower, upper, False)
+    w.remove_body(upper)
+    again = w.add_body(wmo.Box((0.5, 0.5, 0.5)), position=(0, 4, 0))
+    assert again.slot == upper.slot and w.pair_collision(lower, again)
+    w.step(180)
+    assert abs(again.position[1] - 1.5) < 0.02
+
+
+@pytest.mark.parametrize("call", [
+    lambda w, a, b: w.set_group_collision(64, 0, False),
+    lambda w, a, b: w.set_group_collision(0, -1, False),
+    lambda w, a, b: w.add_body(wmo.Sphere(0.5), collision_group=64),
+    lambda w, a, b: setattr(a, "collision_group", 99),
+    lambda w, a, b: w.set_pair_collision(a, a, False),
+])
+def test_bad_filter_arguments_raise_and_change_nothing(call):
+    w, lower, upper = _two_stacked_boxes()
+    n = w.body_count
+    with pytest.raises(ValueError):
+        call(w, lower, upper)
+    assert w.body_count == n and lower.collision_group == 0 and w.pair_collision(lower, upper)
+    assert all(w.group_collision(0, g) for g in range(64))

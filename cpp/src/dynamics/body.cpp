@@ -50,6 +50,9 @@ void validate_body_def(const BodyDef& d) {
   require_non_negative("linear_damping", d.linear_damping);
   require_non_negative("angular_damping", d.angular_damping);
   if (!std::isfinite(d.gravity_scale)) throw InvalidArgument("gravity_scale must be finite, got " + num(d.gravity_scale));
+  if (d.collision_group < 0 || d.collision_group >= kMaxCollisionGroups)
+    throw InvalidArgument("collision_group must be in [0, " + std::to_string(kMaxCollisionGroups - 1) + "], got " +
+                          std::to_string(d.collision_group));
   if (d.kind == BodyKind::kDynamic && !d.shape->is_solid())
     throw InvalidArgument(std::string("kind 'dynamic' needs a solid shape, got a ") + to_string(d.shape->type()) +
                           " (use kind='static' or 'kinematic')");

@@ -123,6 +123,7 @@ void validate_world_settings(const WorldSettings& s) {
 
 World::World(const WorldSettings& settings) : settings_(settings) {
   validate_world_settings(settings_);
+  group_masks_.fill(~std::uint64_t{0});
   BroadphaseSettings bs;
   bs.aabb_margin = settings_.aabb_margin;
   broadphase_ = make_broadphase(settings_.broadphase, bs);
@@ -203,6 +204,7 @@ BodyId World::add_body(const BodyDef& def) {
   shapes_.push_back(def.shape);
   frictions_.push_back(def.friction);
   restitutions_.push_back(def.restitution);
+  groups_.push_back(static_cast<std::uint8_t>(def.collision_group));
   linear_damping_.push_back(def.linear_damping);
   angular_damping_.push_back(def.angular_damping);
   gravity_scale_.push_back(def.gravity_scale);
@@ -223,6 +225,81 @@ BodyId World::add_body(const BodyDef& def) {
   outer_radius_.push_back(bounding_radius(*def.shape, m.local_com));
   // Dense indices of the last step's constraints stay valid (the new row is at the end).
   return BodyId{slot, slots_[slot].generation};
+}
+
+// ---- collision filtering ----
+
+namespace {
+std::uint64_t slot_pair_key(int sa, int sb) {
+  if (sa > sb) std::swap(sa, sb);
+  return (static_cast<std::uint64_t>(sa) << 32) | static_cast<std::uint32_t>(sb);
+}
+void check_group(int g, const char* field) {
+  if (g < 0 || g >= kMaxCollisionGroups)
+    throw InvalidArgument(std::string(field) + " must be in [0, " + std::to_string(kMaxCollisionGroups - 1) +
+                          "], got " + std::to_string(g));
+}
+}  // namespace
+
+bool World::collides(int slot_a, int slot_b) const {
+  const int ga = groups_[slots_[slot_a].index], gb = groups_[slots_[slot_b].index];
+  if (!((group_masks_[ga] >> gb) & 1u)) return false;
+  return filtered_pairs_.empty() ||
+         !std::binary_search(filtered_pairs_.begin(), filtered_pairs_.end(), slot_pair_key(slot_a, slot_b));
+}
+
+void World::update_has_filters() {
+  has_filters_ = !filtered_pairs_.empty();
+  for (const std::uint64_t m : group_masks_) has_filters_ = has_filters_ || m != ~std::uint64_t{0};
+}
+
+void World::set_collision_group(BodyId id, int group) {
+  const int i = require(id, "set_collision_group");
+  check_group(group, "collision_group");
+  groups_[i] = static_cast<std::uint8_t>(group);
+  wake_row(i);  // a pair that now collides must be seen by an awake body
+}
+
+void World::set_group_collision(int a, int b, bool enabled) {
+  check_group(a, "group_a");
+  check_group(b, "group_b");
+  const std::uint64_t bit_a = std::uint64_t{1} << a, bit_b = std::uint64_t{1} << b;
+  if (enabled) {
+    group_masks_[a] |= bit_b;
+    group_masks_[b] |= bit_a;
+  } else {
+    group_masks_[a] &= ~bit_b;
+    group_masks_[b] &= ~bit_a;
+  }
+  update_has_filters();
+}
+
+bool World::group_collision(int a, int b) const {
+  check_group(a, "group_a");
+  check_group(b, "group_b");
+  return (group_masks_[a] >> b) & 1u;
+}
+
+void World::set_pair_collision(BodyId a, BodyId b, bool enabled) {
+  const int ia = require(a, "set_pair_collision body_a");
+  const int ib = require(b, "set_pair_collision body_b");
+  if (ia == ib) throw InvalidArgument("set_pair_collision: body_a and body_b are the same body");
+  const std::uint64_t key = slot_pair_key(a.slot, b.slot);
+  const auto it = std::lower_bound(filtered_pairs_.begin(), filtered_pairs_.end(), key);
+  const bool present = it != filtered_pairs_.end() && *it == key;
+  if (!enabled && !present) filtered_pairs_.insert(it, key);
+  if (enabled && present) {
+    filtered_pairs_.erase(it);
+    wake_row(ia);
+    wake_row(ib);
+  }
+  update_has_filters();
+}
+
+bool World::pair_collision(BodyId a, BodyId b) const {
+  require(a, "pair_collision body_a");
+  require(b, "pair_collision body_b");
+  return !std::binary_search(filtered_pairs_.begin(), filtered_pairs_.end(), slot_pair_key(a.slot, b.slot));
 }
 
 void World::remove_body(BodyId id) {
@@ -249,6 +326,12 @@ void World::remove_body(BodyId id) {
   swap_remove(shapes_, i);
   swap_remove(frictions_, i);
   swap_remove(restitutions_, i);
+  swap_remove(groups_, i);
+  if (!filtered_pairs_.empty()) {  // a later body in the slot starts unfiltered
+    const auto sl = static_cast<std::uint64_t>(id.slot);
+    std::erase_if(filtered_pairs_, [sl](std::uint64_t key) { return (key >> 32) == sl || (key & 0xFFFFFFFFu) == sl; });
+    update_has_filters();
+  }
   swap_remove(linear_damping_, i);
   swap_remove(angular_damping_, i);
   swap_remove(gravity_scale_, i);
@@ -796,6 +879,11 @@ void World::run_step() {
     broadphase_->update();
     pairs_.clear();
     broadphase_->query_pairs(pairs_);
+    if (has_filters_)
+      std::erase_if(pairs_, [&](const ProxyPair& pp) {
+        return !collides(static_cast<int>(broadphase_->user_data(pp.first)),
+                         static_cast<int>(broadphase_->user_data(pp.second)));
+      });
     order_pairs_top_down();
     t.set_count(static_cast<long long>(pairs_.size()));
   }
@@ -1222,6 +1310,7 @@ int World::continuous_step() {
       Sweep& s2 = sweeps_[order[l]];
       if (s2.box.min.x() > s1.box.max.x()) break;
       if (!s1.box.overlaps(s2.box) || solver_saw(s1.body, s2.body)) continue;
+      if (has_filters_ && !collides(slot_of_[s1.body], slot_of_[s2.body])) continue;
       sweep_pairs_.emplace_back(order[k], order[l]);
       const PairHit h =
           sweep_pair(s1, s2.body, s2.motion, s2.reach, std::min(allowance_of(s1.body), allowance_of(s2.body)));
@@ -1240,6 +1329,7 @@ int World::continuous_step() {
       const int j = slots_[static_cast<int>(broadphase_->user_data(id))].index;
       if (j == i || sweep_of_[j] >= 0) return true;  // itself, or swept above
       if (awake_dynamic(j) && solver_saw(i, j)) return true;
+      if (has_filters_ && !collides(slot_of_[i], slot_of_[j])) return true;
       Motion mj;
       mj.start = Pose(positions_[j], orientations_[j]);
       Real reach_j = 0;

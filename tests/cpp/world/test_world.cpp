@@ -357,3 +357,41 @@ TEST(WorldCcd, StageIsSkippedWhenNoBodyAsksAndForSlowBodies) {
   bad.ccd_penetration = 0;
   EXPECT_THROW(w.set_settings(bad), InvalidArgument);
 }
+
+TEST(WorldFiltering, FilteredPairAndGroupsGetNoContact) {
+  // Two boxes stacked on a ground box: unfiltered the upper one rests on the lower one
+  // (centre at y = 1.5); with the pair or their groups filtered it falls through onto
+  // the ground (centre at 0.5, the two overlapping). 180 steps of 1/60 s settle both.
+  for (int mode = 0; mode < 3; ++mode) {
+    WorldSettings s;
+    s.enable_sleep = false;
+    World w(s);
+    w.add_body(box_def({10, 0.5, 10}, {0, -0.5, 0}, BodyKind::kStatic));
+    BodyDef lower_def = box_def({0.5, 0.5, 0.5}, {0, 2, 0});
+    lower_def.collision_group = mode == 2 ? 4 : 0;
+    const BodyId lower = w.add_body(lower_def);
+    BodyDef upper_def = box_def({0.5, 0.5, 0.5}, {0, 4, 0});
+    upper_def.collision_group = mode == 2 ? 5 : 0;
+    const BodyId upper = w.add_body(upper_def);
+    if (mode == 1) w.set_pair_collision(upper, lower, false);
+    if (mode == 2) w.set_group_collision(5, 4, false);  // both still collide with the ground (0)
+    w.step(180);
+    const Real y = w.positions()[w.index_of(upper)].y();
+    EXPECT_NEAR(y, mode == 0 ? 1.5 : 0.5, 0.02) << "mode " << mode;
+    EXPECT_EQ(w.filtered_pair_count(), mode == 1 ? 1 : 0);
+  }
+}
+
+TEST(WorldFiltering, BadGroupsThrowAndChangeNothing) {
+  World w;
+  const BodyId a = w.add_body(box_def({0.5, 0.5, 0.5}, {0, 2, 0}));
+  EXPECT_THROW(w.set_group_collision(64, 0, false), InvalidArgument);
+  EXPECT_THROW(w.set_collision_group(a, -1), InvalidArgument);
+  EXPECT_THROW(w.set_pair_collision(a, a, false), InvalidArgument);
+  BodyDef d = box_def({0.5, 0.5, 0.5}, {0, 4, 0});
+  d.collision_group = 64;
+  EXPECT_THROW(w.add_body(d), InvalidArgument);
+  EXPECT_EQ(w.body_count(), 1);
+  EXPECT_EQ(w.collision_group(0), 0);
+  EXPECT_TRUE(w.group_collision(0, 63));
+}

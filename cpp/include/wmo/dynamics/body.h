@@ -47,7 +47,15 @@ struct BodyDef {
   /// too): it never passes through anything, however fast it moves or spins. Off by
   /// default; only the bodies that ask pay for it (see world.h, the ccd stage).
   bool ccd = false;
+  /// Collision group, 0..kMaxCollisionGroups-1 (default 0). Two bodies collide only if
+  /// their groups do (World::set_group_collision; every pair of groups collides until
+  /// told otherwise) and their pair is not filtered (World::set_pair_collision): the
+  /// UsdPhysics CollisionGroup and FilteredPairsAPI, Box2D's category bits.
+  int collision_group = 0;
 };
+
+/// Number of collision groups (BodyDef::collision_group): one bit each in a 64-bit mask.
+constexpr int kMaxCollisionGroups = 64;
 
 /// Mass data of a body in its shape's local frame.
 struct BodyMass {

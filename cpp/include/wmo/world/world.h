@@ -262,6 +262,24 @@ class World {
   int ccd_hit_count() const { return ccd_hits_; }
   Real restitution(int index) const { return restitutions_[index]; }
 
+  // ---- Collision filtering (BodyDef::collision_group). A filtered pair gets no contact,
+  // no CCD sweep and does not wake the other's island; filters cost nothing while none
+  // is set (the find_pairs stage skips the check). ----
+  /// Collision group of the body in dense row `index`.
+  int collision_group(int index) const { return groups_[index]; }
+  /// Moves a body to another group (0..kMaxCollisionGroups-1; InvalidArgument otherwise).
+  void set_collision_group(BodyId id, int group);
+  /// Whether bodies of groups a and b collide (symmetric; a == b allowed). Throws
+  /// InvalidArgument for a group outside 0..kMaxCollisionGroups-1.
+  void set_group_collision(int a, int b, bool enabled);
+  bool group_collision(int a, int b) const;
+  /// Whether the two bodies may collide at all (both handles valid, distinct); a
+  /// filtered pair stays filtered until enabled again or one body is removed.
+  void set_pair_collision(BodyId a, BodyId b, bool enabled);
+  bool pair_collision(BodyId a, BodyId b) const;
+  /// Number of filtered body pairs.
+  int filtered_pair_count() const { return static_cast<int>(filtered_pairs_.size()); }
+
   /// Applies an impulse (N s, world) at a world point (m) to a dynamic body; other
   /// kinds ignore it. Applies a force / torque for the next step only.
   void apply_impulse(BodyId id, const Vec3& impulse, const Vec3& world_point);
@@ -389,6 +407,15 @@ class World {
   std::vector<BodyMass> masses_;
   std::vector<std::shared_ptr<const Shape>> shapes_;
   std::vector<Real> frictions_, restitutions_, linear_damping_, angular_damping_, gravity_scale_;
+  std::vector<std::uint8_t> groups_;  ///< collision group per row
+  /// Per group, the groups it collides with (bit j); all ones until filtered.
+  std::array<std::uint64_t, kMaxCollisionGroups> group_masks_;
+  /// Filtered body pairs by slots (smaller slot << 32 | larger), sorted.
+  std::vector<std::uint64_t> filtered_pairs_;
+  /// Some group mask is not all ones, or some pair is filtered: find_pairs checks.
+  bool has_filters_ = false;
+  bool collides(int slot_a, int slot_b) const;
+  void update_has_filters();
   std::vector<Vec3> forces_, torques_;
   bool has_forces_ = false;  ///< some apply_force / apply_torque since the last step
   std::vector<ProxyId> proxies_;
