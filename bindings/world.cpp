@@ -257,7 +257,8 @@ are zero-copy, writable views; see the module notes on their lifetime.
           [](py::object self, std::shared_ptr<Shape> shape, py::object position, py::object orientation,
              const std::string& kind, py::object mass, double density, double friction, double restitution,
              py::object linear_velocity, py::object angular_velocity, double linear_damping, double angular_damping,
-             double gravity_scale, bool ccd, int collision_group) {
+             double gravity_scale, bool ccd, int collision_group, py::object center_of_mass, py::object inertia,
+             py::object inertia_axes) {
             World& w = self.cast<World&>();
             BodyDef d;
             d.shape = std::move(shape);
@@ -275,19 +276,27 @@ are zero-copy, writable views; see the module notes on their lifetime.
             d.gravity_scale = gravity_scale;
             d.ccd = ccd;
             d.collision_group = collision_group;
+            if (!center_of_mass.is_none()) d.center_of_mass = to_vec3(center_of_mass, "center_of_mass");
+            if (!inertia.is_none()) d.inertia = to_vec3(inertia, "inertia");
+            if (!inertia_axes.is_none()) d.inertia_axes = to_quat_xyzw(inertia_axes, "inertia_axes");
             return PyBody{self, w.add_body(d)};
           },
           py::arg("shape"), py::arg("position") = py::none(), py::arg("orientation") = py::none(),
           py::arg("kind") = "dynamic", py::arg("mass") = py::none(), py::arg("density") = 1000.0,
           py::arg("friction") = 0.5, py::arg("restitution") = 0.0, py::arg("linear_velocity") = py::none(),
           py::arg("angular_velocity") = py::none(), py::arg("linear_damping") = 0.0, py::arg("angular_damping") = 0.0,
-          py::arg("gravity_scale") = 1.0, py::arg("ccd") = false, py::arg("collision_group") = 0, R"doc(
+          py::arg("gravity_scale") = 1.0, py::arg("ccd") = false, py::arg("collision_group") = 0,
+          py::arg("center_of_mass") = py::none(), py::arg("inertia") = py::none(), py::arg("inertia_axes") = py::none(),
+          R"doc(
 Adds a body and returns its Body handle. ``kind`` is 'dynamic' (default), 'static' or
 'kinematic'. ``mass`` (kg) overrides ``density`` (kg/m^3); the inertia follows the shape.
 Position (m) and orientation (x, y, z, w) place the shape's frame; velocities are of
 the centre of mass (m/s, rad/s, world frame). ``ccd=True`` turns on continuous
 collision detection for a dynamic body (see World). ``collision_group`` (0..63) is the
-body's group for World.set_group_collision. Bad values raise ValueError naming the
+body's group for World.set_group_collision. ``center_of_mass`` (m, shape frame) overrides
+the shape's centroid (the shape's inertia moves there); ``inertia`` gives the principal
+moments (kg m^2) about it, along ``inertia_axes`` (a unit quaternion in the shape frame):
+UsdPhysics' MassAPI. Bad values raise ValueError naming the
 field; the world is unchanged. Existing state views may detach (see World).
 )doc")
       .def(

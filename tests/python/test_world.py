@@ -319,3 +319,46 @@ def test_bad_filter_arguments_raise_and_change_nothing(call):
         call(w, lower, upper)
     assert w.body_count == n and lower.collision_group == 0 and w.pair_collision(lower, upper)
     assert all(w.group_collision(0, g) for g in range(64))
+
+
+# ---- given mass properties (issue 6: UsdPhysics MassAPI) ----
+
+def _tilt_deg(q):
+    x, y, z, w = q
+    return np.degrees(np.arccos(np.clip(1 - 2 * (x * x + z * z), -1, 1)))
+
+
+@pytest.mark.parametrize("com_x, tips", [(0.3, False), (0.7, True)])
+def test_a_given_centre_of_mass_outside_the_footprint_tips_the_box(com_x, tips):
+    # A 1 m box whose centre of mass is 0.3 m off-centre (inside its footprint) stands;
+    # 0.7 m off (outside) it tips over within 2 s. Tolerances: 5 degrees is far from
+    # either outcome (measured: 0 and about 90).
+    w = wmo.World(sleeping=False, gravity=(0, -9.81, 0))
+    w.add_body(wmo.Box((10, 0.5, 10)), position=(0, -0.5, 0), kind="static")
+    b = w.add_body(wmo.Box((0.5, 0.5, 0.5)), position=(0, 0.5, 0), mass=1.0, center_of_mass=(com_x, 0, 0))
+    w.step(120)
+    assert (_tilt_deg(b.orientation) > 30) == tips
+    if not tips:
+        assert _tilt_deg(b.orientation) < 5
+
+
+def test_given_principal_moments_and_axes_set_the_inertia():
+    # Spinning about a principal axis: the kinetic energy is 1/2 I w^2 with that axis's
+    # moment, wherever the axes point (here rotated 90 degrees about z: local x <-> y).
+    w = wmo.World(gravity=(0, 0, 0))
+    s = np.sqrt(0.5)
+    b = w.add_body(wmo.Sphere(0.5), mass=2.0, inertia=(1.0, 2.0, 3.0), inertia_axes=(0, 0, s, s),
+                   angular_velocity=(0, 3.0, 0))
+    # The principal axis of moment 1.0 (local x) points along y after the 90 degree turn.
+    assert w.kinetic_energy() == pytest.approx(0.5 * 1.0 * 9.0, rel=1e-12)
+    assert b.mass == 2.0
+
+
+@pytest.mark.parametrize("kw", [dict(inertia=(1, 1, 3)), dict(inertia=(0, 1, 1)), dict(inertia=(1, np.nan, 1)),
+                                dict(center_of_mass=(0, np.inf, 0)),
+                                dict(inertia=(1, 1, 1), inertia_axes=(0, 0, 0, 2))])
+def test_bad_mass_properties_raise(kw):
+    w = wmo.World()
+    with pytest.raises(ValueError):
+        w.add_body(wmo.Box((0.5, 0.5, 0.5)), **kw)
+    assert w.body_count == 0

@@ -50,6 +50,23 @@ void validate_body_def(const BodyDef& d) {
   require_non_negative("linear_damping", d.linear_damping);
   require_non_negative("angular_damping", d.angular_damping);
   if (!std::isfinite(d.gravity_scale)) throw InvalidArgument("gravity_scale must be finite, got " + num(d.gravity_scale));
+  const bool com_given = !d.center_of_mass.array().isNaN().all();
+  if (com_given) require_finite("center_of_mass", d.center_of_mass);
+  if (!d.inertia.array().isNaN().all()) {
+    require_finite("inertia", d.inertia);
+    const Vec3& I = d.inertia;
+    // Principal moments of a real body: positive, and the triangle inequality (a
+    // tolerance of 1e-9 relative: a thin rod's or a flat plate's moments meet it with
+    // equality up to rounding).
+    const Real slack = 1e-9 * I.sum();
+    if (!(I.minCoeff() > 0) || I.x() > I.y() + I.z() + slack || I.y() > I.x() + I.z() + slack ||
+        I.z() > I.x() + I.y() + slack)
+      throw InvalidArgument("inertia must be principal moments > 0 that satisfy the triangle inequality, got (" +
+                            num(I.x()) + ", " + num(I.y()) + ", " + num(I.z()) + ")");
+    const Real an = d.inertia_axes.norm();
+    if (!d.inertia_axes.coeffs().allFinite() || std::abs(an - 1) > kUnitQuatTolerance)
+      throw InvalidArgument("inertia_axes must be a unit quaternion (x, y, z, w), got norm " + num(an));
+  }
   if (d.collision_group < 0 || d.collision_group >= kMaxCollisionGroups)
     throw InvalidArgument("collision_group must be in [0, " + std::to_string(kMaxCollisionGroups - 1) + "], got " +
                           std::to_string(d.collision_group));
@@ -68,6 +85,16 @@ BodyMass compute_body_mass(const BodyDef& def) {
   m.inv_mass = 1 / m.mass;
   m.local_com = mp.center_of_mass;
   m.inertia_local = mp.inertia * scale;
+  if (!def.center_of_mass.array().isNaN().all()) {
+    // The shape's inertia moved to the given centre (parallel axes: I + m (|d|^2 1 - d d^T)).
+    const Vec3 d = def.center_of_mass - m.local_com;
+    m.inertia_local += m.mass * (d.squaredNorm() * Mat3::Identity() - d * d.transpose());
+    m.local_com = def.center_of_mass;
+  }
+  if (!def.inertia.array().isNaN().all()) {
+    const Mat3 r = def.inertia_axes.normalized().toRotationMatrix();
+    m.inertia_local = r * def.inertia.asDiagonal() * r.transpose();
+  }
   m.inv_inertia_local = m.inertia_local.inverse();
   if (!m.inv_inertia_local.allFinite() || !std::isfinite(m.inv_mass))
     throw InvalidArgument("mass properties of the shape are degenerate (mass " + num(m.mass) + ")");

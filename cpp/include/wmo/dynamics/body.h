@@ -7,6 +7,7 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
 #include <memory>
 
 #include "wmo/geometry/shapes.h"
@@ -52,6 +53,17 @@ struct BodyDef {
   /// told otherwise) and their pair is not filtered (World::set_pair_collision): the
   /// UsdPhysics CollisionGroup and FilteredPairsAPI, Box2D's category bits.
   int collision_group = 0;
+  /// Centre of mass (m, shape local frame). NaN (the default) takes the shape's
+  /// centroid; a given point moves the shape's inertia there (parallel axes) unless
+  /// `inertia` is given too. Ignored unless dynamic. (UsdPhysics MassAPI centerOfMass.)
+  Vec3 center_of_mass = Vec3::Constant(std::numeric_limits<Real>::quiet_NaN());
+  /// Principal moments of inertia about the centre of mass (kg m^2, each > 0, each no
+  /// more than the sum of the other two). NaN (the default) derives the inertia from
+  /// the shape and the mass. Ignored unless dynamic. (MassAPI diagonalInertia.)
+  Vec3 inertia = Vec3::Constant(std::numeric_limits<Real>::quiet_NaN());
+  /// Orientation of the principal axes in the shape's local frame (unit quaternion);
+  /// used with `inertia`. (MassAPI principalAxes.)
+  Quat inertia_axes = Quat::Identity();
 };
 
 /// Number of collision groups (BodyDef::collision_group): one bit each in a 64-bit mask.
