@@ -84,6 +84,37 @@ the world's state arrays (it changes when another body is removed).
         World& w = world_of(b);
         return w.mass(w.index_of(b.id)).mass;
       }, "Mass (kg); 0 for static and kinematic bodies.")
+      .def_property_readonly(
+          "shape",
+          [](const PyBody& b) {
+            World& w = world_of(b);
+            return std::const_pointer_cast<Shape>(w.shape_ptr(w.index_of(b.id)));
+          },
+          "The body's shape (the same object that was added).")
+      .def_property_readonly(
+          "friction", [](const PyBody& b) { World& w = world_of(b); return w.friction(w.index_of(b.id)); },
+          "Friction coefficient of the body (a pair combines two).")
+      .def_property_readonly(
+          "restitution", [](const PyBody& b) { World& w = world_of(b); return w.restitution(w.index_of(b.id)); },
+          "Restitution coefficient of the body (a pair combines two).")
+      .def_property_readonly(
+          "linear_damping", [](const PyBody& b) { World& w = world_of(b); return w.linear_damping(w.index_of(b.id)); },
+          "1/s.")
+      .def_property_readonly(
+          "angular_damping",
+          [](const PyBody& b) { World& w = world_of(b); return w.angular_damping(w.index_of(b.id)); }, "1/s.")
+      .def_property_readonly(
+          "gravity_scale", [](const PyBody& b) { World& w = world_of(b); return w.gravity_scale(w.index_of(b.id)); },
+          "Multiplies the world's gravity for this body.")
+      .def_property_readonly(
+          "center_of_mass",
+          [](const PyBody& b) { World& w = world_of(b); return to_array(w.mass(w.index_of(b.id)).local_com); },
+          "Centre of mass (m, shape frame); zeros for static and kinematic bodies.")
+      .def_property_readonly(
+          "inertia",
+          [](const PyBody& b) { World& w = world_of(b); return to_array(w.mass(w.index_of(b.id)).inertia_local); },
+          "Inertia tensor about the centre of mass (kg m^2, shape axes), (3, 3); zeros for "
+          "static and kinematic bodies.")
       .def_property(
           "position", [](const PyBody& b) { return to_array(world_of(b).positions()[world_of(b).index_of(b.id)]); },
           [](const PyBody& b, py::object v) { world_of(b).set_position(b.id, to_vec3(v, "position")); },

@@ -362,3 +362,20 @@ def test_bad_mass_properties_raise(kw):
     with pytest.raises(ValueError):
         w.add_body(wmo.Box((0.5, 0.5, 0.5)), **kw)
     assert w.body_count == 0
+
+
+def test_body_reports_its_definition():
+    # What a scene writer (USD, OBJ) reads back: the same shape object and the values
+    # given, or derived ones (a 2 kg box of half-extents (1, 0.5, 0.25): inertia
+    # m/3 (b^2 + c^2), ...).
+    w = wmo.World()
+    box = wmo.Box((1.0, 0.5, 0.25))
+    b = w.add_body(box, mass=2.0, friction=0.3, restitution=0.4, linear_damping=0.1, angular_damping=0.2,
+                   gravity_scale=0.5, collision_group=3)
+    assert b.shape is box or b.shape.half_extents.tolist() == [1.0, 0.5, 0.25]
+    assert (b.friction, b.restitution, b.linear_damping, b.angular_damping, b.gravity_scale) == (0.3, 0.4, 0.1, 0.2, 0.5)
+    np.testing.assert_allclose(np.diag(b.inertia), [2 / 3 * (0.25 + 0.0625), 2 / 3 * (1 + 0.0625), 2 / 3 * (1 + 0.25)],
+                               rtol=1e-12)
+    assert b.center_of_mass.tolist() == [0, 0, 0]
+    s = w.add_body(wmo.Sphere(1.0), kind="static")
+    assert s.inertia.tolist() == [[0.0] * 3] * 3 and s.mass == 0

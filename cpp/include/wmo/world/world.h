@@ -254,6 +254,11 @@ class World {
   void wake(BodyId id);
   const BodyMass& mass(int index) const { return masses_[index]; }
   const Shape& shape(int index) const { return *shapes_[index]; }
+  /// The shape object itself (shared, never copied).
+  const std::shared_ptr<const Shape>& shape_ptr(int index) const { return shapes_[index]; }
+  Real linear_damping(int index) const { return linear_damping_[index]; }
+  Real angular_damping(int index) const { return angular_damping_[index]; }
+  Real gravity_scale(int index) const { return gravity_scale_[index]; }
   Real friction(int index) const { return frictions_[index]; }
   /// Continuous collision detection of a body (BodyDef::ccd).
   bool ccd(int index) const { return ccd_[index] != 0; }
