@@ -37,6 +37,28 @@ from . import geometry, scenes
 
 __version__ = "0.1.0"
 
+
+def load(path, **options) -> World:
+    """The World a scene file describes (.usda/.usdc/.usd: UsdPhysics; .obj: a mesh),
+    through :func:`wmo.io.load`; each thing in the file WMO does not support yet is
+    reported as a Python warning (``wmo.io.load`` returns them, with the bodies by prim
+    path)."""
+    import warnings
+
+    from . import io
+
+    result = io.load(path, **options)
+    for w in result.warnings:
+        warnings.warn(w, stacklevel=2)
+    return result.world
+
+
+def save(world: World, path, **options) -> None:
+    """Writes a World to a scene file (see :func:`wmo.io.save`)."""
+    from . import io
+
+    io.save(world, path, **options)
+
 __all__ = [
     "Body",
     "Box",
@@ -54,5 +76,7 @@ __all__ = [
     "TriangleMesh",
     "World",
     "geometry",
+    "load",
+    "save",
     "scenes",
 ]
