@@ -68,6 +68,37 @@ def _add_body_args(shape: Any, position, orientation, linear_velocity, angular_v
     return args
 
 
+def _settle(ev: tuple, pending: dict, replies: dict) -> None:
+    """Resolves the future a received ok / error / reply answers (both clients: the
+    futures are concurrent.futures or asyncio ones, which share these methods)."""
+    kind = ev[0]
+    if kind == "ok":
+        fut, conv = pending.pop(ev[1], (None, None))
+        if fut is not None and not fut.done():
+            fut.set_result(conv(ev[2]) if conv else ev[2])
+    elif kind == "error":
+        fut = pending.pop(ev[1], (None, None))[0] if ev[1] is not None else None
+        fut = fut or replies.pop(ev[1], None)
+        if fut is not None and not fut.done():
+            fut.set_exception(RemoteError(ev[2], ev[3]))
+    elif kind == "reply":
+        fut = replies.pop(ev[1], None)
+        if fut is not None and not fut.done():
+            fut.set_result(ev[2])
+
+
+def _fail_all(pending: dict, replies: dict, err: BaseException) -> None:
+    """Fails every request still waiting (the connection closed)."""
+    for fut, _ in list(pending.values()):
+        if not fut.done():
+            fut.set_exception(err)
+    for fut in list(replies.values()):
+        if not fut.done():
+            fut.set_exception(err)
+    pending.clear()
+    replies.clear()
+
+
 class _Mirror:
     """The protocol state both clients share (no I/O): request ids, the snapshot
     decoder, and the scene mirror."""
@@ -352,19 +383,8 @@ class RemoteScene(_SceneApi, _StateViews):
                         self._ws.send(ev[2])
                     except ConnectionClosed:
                         break
-                elif kind == "ok":
-                    fut, conv = self._pending.pop(ev[1], (None, None))
-                    if fut is not None:
-                        fut.set_result(conv(ev[2]) if conv else ev[2])
-                elif kind == "error":
-                    fut = self._pending.pop(ev[1], (None, None))[0] if ev[1] is not None else None
-                    fut = fut or self._replies.pop(ev[1], None)
-                    if fut is not None:
-                        fut.set_exception(RemoteError(ev[2], ev[3]))
-                elif kind == "reply":
-                    fut = self._replies.pop(ev[1], None)
-                    if fut is not None:
-                        fut.set_result(ev[2])
+                else:
+                    _settle(ev, self._pending, self._replies)
                 with self._cond:
                     self._cond.notify_all()
         except ConnectionClosed as e:
@@ -378,14 +398,7 @@ class RemoteScene(_SceneApi, _StateViews):
         finally:
             with self._cond:
                 self._closed = True
-                for fut, _ in list(self._pending.values()):
-                    if not fut.done():
-                        fut.set_exception(err)
-                for fut in list(self._replies.values()):
-                    if not fut.done():
-                        fut.set_exception(err)
-                self._pending.clear()
-                self._replies.clear()
+                _fail_all(self._pending, self._replies, err)
                 self._cond.notify_all()
 
     def _call(self, op: str, args: dict, wait: bool = True, conv=None):
@@ -529,30 +542,14 @@ class AsyncRemoteScene(_SceneApi, _StateViews):
                 ev = self._m.receive(raw)
                 if ev[0] == "snapshot":
                     await self._ws.send(ev[2])
-                elif ev[0] == "ok":
-                    fut, conv = self._pending.pop(ev[1], (None, None))
-                    if fut is not None and not fut.done():
-                        fut.set_result(conv(ev[2]) if conv else ev[2])
-                elif ev[0] == "error":
-                    fut = self._pending.pop(ev[1], (None, None))[0] if ev[1] is not None else None
-                    fut = fut or self._replies.pop(ev[1], None)
-                    if fut is not None and not fut.done():
-                        fut.set_exception(RemoteError(ev[2], ev[3]))
-                elif ev[0] == "reply":
-                    fut = self._replies.pop(ev[1], None)
-                    if fut is not None and not fut.done():
-                        fut.set_result(ev[2])
+                else:
+                    _settle(ev, self._pending, self._replies)
                 self._new.set()
         except Exception as e:
             err = e if not type(e).__name__.startswith("ConnectionClosed") else err
         finally:
             self._closed = True
-            for fut, _ in list(self._pending.values()):
-                if not fut.done():
-                    fut.set_exception(err)
-            for fut in self._replies.values():
-                if not fut.done():
-                    fut.set_exception(err)
+            _fail_all(self._pending, self._replies, err)
             self._new.set()
 
     def _call(self, op: str, args: dict, wait: bool = True, conv=None):
