@@ -34,6 +34,12 @@ std::string num(Real v) {
 }
 }  // namespace
 
+void check_collision_group(int group, const char* field) {
+  if (group < 0 || group >= kMaxCollisionGroups)
+    throw InvalidArgument(std::string(field) + " must be in [0, " + std::to_string(kMaxCollisionGroups - 1) +
+                          "], got " + std::to_string(group));
+}
+
 void validate_body_def(const BodyDef& d) {
   if (!d.shape) throw InvalidArgument("shape must be a shape, got None");
   require_finite("position", d.position);
@@ -50,8 +56,7 @@ void validate_body_def(const BodyDef& d) {
   require_non_negative("linear_damping", d.linear_damping);
   require_non_negative("angular_damping", d.angular_damping);
   if (!std::isfinite(d.gravity_scale)) throw InvalidArgument("gravity_scale must be finite, got " + num(d.gravity_scale));
-  const bool com_given = !d.center_of_mass.array().isNaN().all();
-  if (com_given) require_finite("center_of_mass", d.center_of_mass);
+  if (!d.center_of_mass.array().isNaN().all()) require_finite("center_of_mass", d.center_of_mass);
   if (!d.inertia.array().isNaN().all()) {
     require_finite("inertia", d.inertia);
     const Vec3& I = d.inertia;
@@ -67,9 +72,7 @@ void validate_body_def(const BodyDef& d) {
     if (!d.inertia_axes.coeffs().allFinite() || std::abs(an - 1) > kUnitQuatTolerance)
       throw InvalidArgument("inertia_axes must be a unit quaternion (x, y, z, w), got norm " + num(an));
   }
-  if (d.collision_group < 0 || d.collision_group >= kMaxCollisionGroups)
-    throw InvalidArgument("collision_group must be in [0, " + std::to_string(kMaxCollisionGroups - 1) + "], got " +
-                          std::to_string(d.collision_group));
+  check_collision_group(d.collision_group, "collision_group");
   if (d.kind == BodyKind::kDynamic && !d.shape->is_solid())
     throw InvalidArgument(std::string("kind 'dynamic' needs a solid shape, got a ") + to_string(d.shape->type()) +
                           " (use kind='static' or 'kinematic')");

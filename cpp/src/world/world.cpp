@@ -234,11 +234,6 @@ std::uint64_t slot_pair_key(int sa, int sb) {
   if (sa > sb) std::swap(sa, sb);
   return (static_cast<std::uint64_t>(sa) << 32) | static_cast<std::uint32_t>(sb);
 }
-void check_group(int g, const char* field) {
-  if (g < 0 || g >= kMaxCollisionGroups)
-    throw InvalidArgument(std::string(field) + " must be in [0, " + std::to_string(kMaxCollisionGroups - 1) +
-                          "], got " + std::to_string(g));
-}
 }  // namespace
 
 bool World::collides(int slot_a, int slot_b) const {
@@ -255,14 +250,14 @@ void World::update_has_filters() {
 
 void World::set_collision_group(BodyId id, int group) {
   const int i = require(id, "set_collision_group");
-  check_group(group, "collision_group");
+  check_collision_group(group, "collision_group");
   groups_[i] = static_cast<std::uint8_t>(group);
   wake_row(i);  // a pair that now collides must be seen by an awake body
 }
 
 void World::set_group_collision(int a, int b, bool enabled) {
-  check_group(a, "group_a");
-  check_group(b, "group_b");
+  check_collision_group(a, "group_a");
+  check_collision_group(b, "group_b");
   const std::uint64_t bit_a = std::uint64_t{1} << a, bit_b = std::uint64_t{1} << b;
   if (enabled) {
     group_masks_[a] |= bit_b;
@@ -275,8 +270,8 @@ void World::set_group_collision(int a, int b, bool enabled) {
 }
 
 bool World::group_collision(int a, int b) const {
-  check_group(a, "group_a");
-  check_group(b, "group_b");
+  check_collision_group(a, "group_a");
+  check_collision_group(b, "group_b");
   return (group_masks_[a] >> b) & 1u;
 }
 

@@ -193,14 +193,6 @@ def quat_from_matrix(r: np.ndarray) -> Tuple[float, float, float, float]:
     return tuple(float(v) for v in qa)  # type: ignore[return-value]
 
 
-def matrix_from_quat(q) -> np.ndarray:
-    """Rotation matrix (column convention) of a unit quaternion (x, y, z, w)."""
-    x, y, z, w = (float(v) for v in q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-
-
 def drop_degenerate(vertices: np.ndarray, triangles: np.ndarray, where: str,
                     warnings: List[str]) -> np.ndarray:
     """Returns ``triangles`` without those of zero area (relative to the mesh size);

@@ -74,7 +74,7 @@ import numpy as np
 
 from .. import _core as wmo
 from . import LoadResult, SceneFileNotFoundError, SceneFormatError
-from .obj import convex_decomposition, drop_degenerate, make_hull, matrix_from_quat, quat_from_matrix
+from .obj import convex_decomposition, drop_degenerate, make_hull, quat_from_matrix
 
 try:  # pxr is optional for the package; load_usd says how to get it.
     from pxr import Sdf, Usd, UsdGeom, UsdPhysics, UsdShade  # type: ignore[import-not-found]
@@ -561,7 +561,7 @@ def load_usd(path: Union[str, "os.PathLike[str]"], *, meters_per_unit: Optional[
             if "inertia" in given:
                 kwargs["inertia"] = given["inertia"]
                 axes = given.get("inertia_axes", np.array([0.0, 0.0, 0.0, 1.0]))
-                kwargs["inertia_axes"] = quat_from_matrix(r.T @ matrix_from_quat(axes))
+                kwargs["inertia_axes"] = quat_from_matrix(r.T @ wmo.Pose(orientation=axes).matrix())
         elif kind == "kinematic":
             if lin is not None:
                 kwargs["linear_velocity"] = lin

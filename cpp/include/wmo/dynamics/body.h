@@ -68,6 +68,8 @@ struct BodyDef {
 
 /// Number of collision groups (BodyDef::collision_group): one bit each in a 64-bit mask.
 constexpr int kMaxCollisionGroups = 64;
+/// Throws InvalidArgument naming `field` unless 0 <= group < kMaxCollisionGroups.
+void check_collision_group(int group, const char* field);
 
 /// Mass data of a body in its shape's local frame.
 struct BodyMass {
