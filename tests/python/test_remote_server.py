@@ -24,6 +24,7 @@ pytest.importorskip("websockets")
 import wmo  # noqa: E402
 from wmo.remote import EditError, SceneModel  # noqa: E402
 from wmo.remote.client import RemoteError, connect, connect_async  # noqa: E402
+from wmo.remote.experiment import _free_port, _wait_port  # noqa: E402
 from wmo.remote.journal import SceneStore  # noqa: E402
 from wmo.remote.server import Server, ServerLimits  # noqa: E402
 
@@ -464,27 +465,16 @@ def test_a_stalled_client_does_not_hold_up_the_others(tmp_path):
         srv.stop()
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def _start_server_process(port: int, data: Path) -> subprocess.Popen:
     proc = subprocess.Popen([sys.executable, "-m", "wmo", "serve", "--port", str(port), "--data", str(data),
                              "--scene", "lab=tower", "--rate", "60"],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline:
-        try:
-            with socket.create_connection(("127.0.0.1", port), timeout=0.5):
-                return proc
-        except OSError:
-            if proc.poll() is not None:
-                raise RuntimeError(proc.stdout.read())
-            time.sleep(0.1)
-    proc.kill()
-    raise RuntimeError("server did not start")
+    try:
+        _wait_port(port, proc)
+    except RuntimeError as e:
+        proc.kill()
+        raise RuntimeError(f"{e}: {proc.communicate(timeout=10)[0]}") from None
+    return proc
 
 
 def test_sigkill_mid_edit_loses_no_acknowledged_edit(tmp_path):

@@ -349,10 +349,7 @@ class SceneModel:
         d, state = dict(self.defs[rid]), self._state(rid)
         owner = self.owner.get(rid)
         self._remove(rid)
-        d_new = dict(d, kind=kind)
-        if kind != "dynamic":
-            state["linear_velocity"] = state["linear_velocity"] if kind == "kinematic" else None
-            state["angular_velocity"] = state["angular_velocity"] if kind == "kinematic" else None
+        d_new = dict(d, kind=kind)  # dynamic <-> kinematic only (static bodies are never grabbed)
         self._add(d_new, state, rid)
         self.defs[rid] = d_new
         if owner is not None:
