@@ -308,7 +308,19 @@ are zero-copy, writable views; see the module notes on their lifetime.
             d.ccd = ccd;
             d.collision_group = collision_group;
             if (!center_of_mass.is_none()) d.center_of_mass = to_vec3(center_of_mass, "center_of_mass");
-            if (!inertia.is_none()) d.inertia = to_vec3(inertia, "inertia");
+            if (!inertia.is_none()) {
+              // (3,) principal moments, or a (3, 3) tensor taken as is.
+              const auto a = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(inertia);
+              if (a && a.ndim() == 2) {
+                if (a.shape(0) != 3 || a.shape(1) != 3)
+                  throw InvalidArgument("inertia must be 3 principal moments or a (3, 3) tensor, got shape (" +
+                                        std::to_string(a.shape(0)) + ", " + std::to_string(a.shape(1)) + ")");
+                for (int r = 0; r < 3; ++r)
+                  for (int c = 0; c < 3; ++c) d.inertia_tensor(r, c) = a.at(r, c);
+              } else {
+                d.inertia = to_vec3(inertia, "inertia");
+              }
+            }
             if (!inertia_axes.is_none()) d.inertia_axes = to_quat_xyzw(inertia_axes, "inertia_axes");
             return PyBody{self, w.add_body(d)};
           },
@@ -327,7 +339,8 @@ collision detection for a dynamic body (see World). ``collision_group`` (0..63) 
 body's group for World.set_group_collision. ``center_of_mass`` (m, shape frame) overrides
 the shape's centroid (the shape's inertia moves there); ``inertia`` gives the principal
 moments (kg m^2) about it, along ``inertia_axes`` (a unit quaternion in the shape frame):
-UsdPhysics' MassAPI. Bad values raise ValueError naming the
+UsdPhysics' MassAPI; or the full (3, 3) tensor about it in the shape frame (symmetric,
+taken bit for bit: ``Body.inertia`` of a saved body restores it exactly). Bad values raise ValueError naming the
 field; the world is unchanged. Existing state views may detach (see World).
 )doc")
       .def(
@@ -387,6 +400,48 @@ field; the world is unchanged. Existing state views may detach (see World).
       .def_property_readonly("gravity", [](const World& w) { return to_array(w.settings().gravity); })
       .def_property_readonly("substeps", [](const World& w) { return w.settings().substeps; })
       .def_property_readonly("iterations", [](const World& w) { return w.settings().iterations; })
+      .def_property_readonly(
+          "settings",
+          [](const World& w) {
+            const WorldSettings& s = w.settings();
+            py::dict d;
+            d["gravity"] = to_array(s.gravity);
+            d["dt"] = s.dt;
+            d["substeps"] = s.substeps;
+            d["iterations"] = s.iterations;
+            d["relax_iterations"] = s.relax_iterations;
+            d["contact_hertz"] = s.solver.contact_hertz;
+            d["contact_damping_ratio"] = s.solver.damping_ratio;
+            d["contact_push_max"] = s.solver.push_max;
+            d["restitution_threshold"] = s.solver.restitution_threshold;
+            d["speculative_distance"] = s.speculative_distance;
+            d["speculative_motion"] = s.speculative_motion;
+            d["manifold_reuse_distance"] = s.manifold_reuse_distance;
+            d["manifold_reuse_angle"] = s.manifold_reuse_angle;
+            d["friction_combine"] = std::string(to_string(s.friction_combine));
+            d["restitution_combine"] = std::string(to_string(s.restitution_combine));
+            d["gyroscopic"] = s.gyroscopic;
+            d["sleeping"] = s.enable_sleep;
+            d["sleep_linear_threshold"] = s.sleep_linear_threshold;
+            d["sleep_angular_threshold"] = s.sleep_angular_threshold;
+            d["time_to_sleep"] = s.time_to_sleep;
+            d["threads"] = s.threads;
+            d["ccd"] = s.enable_ccd;
+            d["ccd_motion_threshold"] = s.ccd_motion_threshold;
+            d["ccd_penetration"] = s.ccd_penetration;
+            return d;
+          },
+          "Every constructor setting as a dict (a copy): ``wmo.World(**world.settings)`` makes "
+          "an empty world with the same settings.")
+      .def(
+          "filtered_pairs",
+          [](py::object self) {
+            py::list out;
+            for (const auto& [a, b] : self.cast<const World&>().filtered_pairs())
+              out.append(py::make_tuple(PyBody{self, a}, PyBody{self, b}));
+            return out;
+          },
+          "The body pairs filtered by set_pair_collision(a, b, False), as (Body, Body) tuples.")
       .def_property_readonly("step_count", &World::step_count)
       .def_property_readonly("reused_manifolds", &World::reused_manifold_count,
                              "Manifolds of the last step reused from the cache instead of recomputed "

@@ -59,6 +59,22 @@ def save(world: World, path, **options) -> None:
 
     io.save(world, path, **options)
 
+
+def state_hash(world: World) -> str:
+    """SHA-256 (hex) of the world's state bits: positions, orientations, linear and
+    angular velocities of every body, in row order. Two worlds with the same hash are
+    in the same state bit for bit; WMO's determinism tests (same run twice, 1 or 2
+    threads, a scene saved to USD and loaded back) compare it."""
+    import hashlib
+
+    import numpy as np
+
+    h = hashlib.sha256()
+    for a in (world.positions, world.orientations, world.linear_velocities, world.angular_velocities):
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()
+
+
 __all__ = [
     "Body",
     "Box",
@@ -78,5 +94,6 @@ __all__ = [
     "geometry",
     "load",
     "save",
+    "state_hash",
     "scenes",
 ]

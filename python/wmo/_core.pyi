@@ -6,7 +6,7 @@ Array properties return read-only NumPy arrays (float64 unless stated); copy the
 from __future__ import annotations
 
 import types
-from typing import Iterable, List, Tuple, Union
+from typing import Any, Iterable, List, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -292,6 +292,10 @@ class World:
                  ccd: bool = False, collision_group: int = 0,
                  center_of_mass: npt.ArrayLike | None = None, inertia: npt.ArrayLike | None = None,
                  inertia_axes: npt.ArrayLike | None = None) -> Body: ...
+    @property
+    def settings(self) -> dict[str, Any]:
+        """Every constructor setting (a copy): World(**world.settings)."""
+    def filtered_pairs(self) -> list[tuple[Body, Body]]: ...
     def set_group_collision(self, group_a: int, group_b: int, enabled: bool) -> None: ...
     def group_collision(self, group_a: int, group_b: int) -> bool: ...
     def set_pair_collision(self, body_a: Body, body_b: Body, enabled: bool) -> None: ...

@@ -4,8 +4,6 @@ Known failures are pinned as strict xfails with what was measured, so they turn 
 passes (and fail the xfail) the day the solver is fixed, and cannot be forgotten."""
 from __future__ import annotations
 
-import hashlib
-
 import numpy as np
 import pytest
 
@@ -13,11 +11,7 @@ import wmo
 from wmo import scenes
 
 
-def state_hash(world) -> str:
-    h = hashlib.sha256()
-    for a in (world.positions, world.orientations, world.linear_velocities, world.angular_velocities):
-        h.update(np.ascontiguousarray(a).tobytes())
-    return h.hexdigest()
+state_hash = wmo.state_hash
 
 
 def test_determinism_same_scene_twice_gives_the_same_bits():

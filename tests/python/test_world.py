@@ -354,9 +354,44 @@ def test_given_principal_moments_and_axes_set_the_inertia():
     assert b.mass == 2.0
 
 
+def test_a_given_inertia_tensor_and_mass_are_taken_bit_for_bit():
+    # What a saved body restores (wmo.io): Body.inertia and Body.mass exactly, even
+    # where rescaling the shape's inertia to the mass would round.
+    w = wmo.World()
+    a = w.add_body(wmo.ConvexHull(np.random.default_rng(2).normal(size=(20, 3))), mass=0.1 * 3,
+                   center_of_mass=(0.01, 0.02, 0.03))
+    b = w.add_body(wmo.Box((1, 1, 1)), mass=a.mass, center_of_mass=a.center_of_mass, inertia=np.asarray(a.inertia))
+    assert b.mass == a.mass == 0.1 * 3
+    assert np.array_equal(b.inertia, a.inertia) and np.array_equal(b.center_of_mass, a.center_of_mass)
+
+
+def test_filtered_pairs_lists_each_filtered_pair_once():
+    w, lower, upper = _two_stacked_boxes()
+    third = w.add_body(wmo.Sphere(0.5), position=(3, 1, 0))
+    assert w.filtered_pairs() == []
+    w.set_pair_collision(upper, lower, False)
+    w.set_pair_collision(third, lower, False)
+    assert [(p.index, q.index) for p, q in w.filtered_pairs()] == [(lower.index, upper.index),
+                                                                    (lower.index, third.index)]
+    w.set_pair_collision(lower, upper, True)
+    assert [(p.index, q.index) for p, q in w.filtered_pairs()] == [(lower.index, third.index)]
+
+
+def test_settings_rebuild_an_equal_world():
+    w = wmo.World(gravity=(1, 2, 3), dt=0.01, substeps=3, friction_combine="average", ccd=False, threads=2)
+    w2 = wmo.World(**w.settings)
+    assert w2.settings.keys() == w.settings.keys()
+    assert all(np.array_equal(w2.settings[k], v) for k, v in w.settings.items())
+    assert w.settings["friction_combine"] == "average" and w.settings["threads"] == 2
+
+
 @pytest.mark.parametrize("kw", [dict(inertia=(1, 1, 3)), dict(inertia=(0, 1, 1)), dict(inertia=(1, np.nan, 1)),
                                 dict(center_of_mass=(0, np.inf, 0)),
-                                dict(inertia=(1, 1, 1), inertia_axes=(0, 0, 0, 2))])
+                                dict(inertia=(1, 1, 1), inertia_axes=(0, 0, 0, 2)),
+                                dict(inertia=[[1, 0.5, 0], [0, 1, 0], [0, 0, 1]]),  # not symmetric
+                                dict(inertia=[[1, 0, 0], [0, 1, 0], [0, 0, 3]]),  # eigenvalues break the triangle
+                                dict(inertia=[[1, 0, 0], [0, 1, 0], [0, 0, -1]]),
+                                dict(inertia=np.ones((3, 4)))])
 def test_bad_mass_properties_raise(kw):
     w = wmo.World()
     with pytest.raises(ValueError):

@@ -1,6 +1,8 @@
 // Body definitions: validation and mass properties.
 #include "wmo/dynamics/body.h"
 
+#include <Eigen/Eigenvalues>
+
 #include <cmath>
 #include <sstream>
 #include <string>
@@ -40,6 +42,17 @@ void check_collision_group(int group, const char* field) {
                           "], got " + std::to_string(group));
 }
 
+/// Principal moments of a real body: positive, and the triangle inequality (a
+/// tolerance of 1e-9 relative: a thin rod's or a flat plate's moments meet it with
+/// equality up to rounding).
+static void check_principal_moments(const Vec3& I, const char* field) {
+  const Real slack = 1e-9 * I.sum();
+  if (!(I.minCoeff() > 0) || I.x() > I.y() + I.z() + slack || I.y() > I.x() + I.z() + slack ||
+      I.z() > I.x() + I.y() + slack)
+    throw InvalidArgument(std::string(field) + " must be principal moments > 0 that satisfy the triangle inequality, got (" +
+                          num(I.x()) + ", " + num(I.y()) + ", " + num(I.z()) + ")");
+}
+
 void validate_body_def(const BodyDef& d) {
   if (!d.shape) throw InvalidArgument("shape must be a shape, got None");
   require_finite("position", d.position);
@@ -59,18 +72,23 @@ void validate_body_def(const BodyDef& d) {
   if (!d.center_of_mass.array().isNaN().all()) require_finite("center_of_mass", d.center_of_mass);
   if (!d.inertia.array().isNaN().all()) {
     require_finite("inertia", d.inertia);
-    const Vec3& I = d.inertia;
-    // Principal moments of a real body: positive, and the triangle inequality (a
-    // tolerance of 1e-9 relative: a thin rod's or a flat plate's moments meet it with
-    // equality up to rounding).
-    const Real slack = 1e-9 * I.sum();
-    if (!(I.minCoeff() > 0) || I.x() > I.y() + I.z() + slack || I.y() > I.x() + I.z() + slack ||
-        I.z() > I.x() + I.y() + slack)
-      throw InvalidArgument("inertia must be principal moments > 0 that satisfy the triangle inequality, got (" +
-                            num(I.x()) + ", " + num(I.y()) + ", " + num(I.z()) + ")");
+    check_principal_moments(d.inertia, "inertia");
     const Real an = d.inertia_axes.norm();
     if (!d.inertia_axes.coeffs().allFinite() || std::abs(an - 1) > kUnitQuatTolerance)
       throw InvalidArgument("inertia_axes must be a unit quaternion (x, y, z, w), got norm " + num(an));
+  }
+  if (!d.inertia_tensor.array().isNaN().all()) {
+    if (!d.inertia.array().isNaN().all())
+      throw InvalidArgument("inertia_tensor and inertia cannot both be given");
+    const Mat3& I = d.inertia_tensor;
+    if (!I.allFinite()) throw InvalidArgument("inertia_tensor must be finite");
+    // Symmetric up to rounding (1e-12 of its largest entry): a tensor computed as
+    // R D R^T in floating point is symmetric to a few ulps, not always bit for bit.
+    const Real asym = (I - I.transpose()).cwiseAbs().maxCoeff();
+    if (!(asym <= 1e-12 * I.cwiseAbs().maxCoeff()))
+      throw InvalidArgument("inertia_tensor must be symmetric, got an asymmetry of " + num(asym));
+    check_principal_moments(Eigen::SelfAdjointEigenSolver<Mat3>(I, Eigen::EigenvaluesOnly).eigenvalues(),
+                            "inertia_tensor (its eigenvalues)");
   }
   check_collision_group(d.collision_group, "collision_group");
   if (d.kind == BodyKind::kDynamic && !d.shape->is_solid())
@@ -84,7 +102,7 @@ BodyMass compute_body_mass(const BodyDef& def) {
   const MassProperties mp = def.shape->mass_properties(def.density);
   Real scale = 1;
   if (!std::isnan(def.mass)) scale = def.mass / mp.mass;
-  m.mass = mp.mass * scale;
+  m.mass = std::isnan(def.mass) ? mp.mass : def.mass;  // a given mass exactly (mp.mass * scale may round)
   m.inv_mass = 1 / m.mass;
   m.local_com = mp.center_of_mass;
   m.inertia_local = mp.inertia * scale;
@@ -98,6 +116,7 @@ BodyMass compute_body_mass(const BodyDef& def) {
     const Mat3 r = def.inertia_axes.normalized().toRotationMatrix();
     m.inertia_local = r * def.inertia.asDiagonal() * r.transpose();
   }
+  if (!def.inertia_tensor.array().isNaN().all()) m.inertia_local = def.inertia_tensor;
   m.inv_inertia_local = m.inertia_local.inverse();
   if (!m.inv_inertia_local.allFinite() || !std::isfinite(m.inv_mass))
     throw InvalidArgument("mass properties of the shape are degenerate (mass " + num(m.mass) + ")");

@@ -176,7 +176,9 @@ BodyId World::add_body(const BodyDef& def) {
   validate_body_def(def);
   const BodyMass m = compute_body_mass(def);  // may throw: nothing changed yet
   Quat q = def.orientation;
-  q.normalize();
+  // Normalised unless already unit to rounding: normalize() is not idempotent in the
+  // last bit, and a saved orientation must come back bit for bit (wmo.io round trip).
+  if (std::abs(q.squaredNorm() - 1) > 1e-15) q.normalize();
   const Aabb box = def.shape->world_aabb(Pose(def.position, q)).fattened(settings_.speculative_distance);
 
   int slot;
@@ -295,6 +297,16 @@ bool World::pair_collision(BodyId a, BodyId b) const {
   require(a, "pair_collision body_a");
   require(b, "pair_collision body_b");
   return !std::binary_search(filtered_pairs_.begin(), filtered_pairs_.end(), slot_pair_key(a.slot, b.slot));
+}
+
+std::vector<std::pair<BodyId, BodyId>> World::filtered_pairs() const {
+  std::vector<std::pair<BodyId, BodyId>> out;
+  out.reserve(filtered_pairs_.size());
+  for (const std::uint64_t key : filtered_pairs_) {
+    const auto sa = static_cast<std::int32_t>(key >> 32), sb = static_cast<std::int32_t>(key & 0xFFFFFFFFu);
+    out.emplace_back(BodyId{sa, slots_[sa].generation}, BodyId{sb, slots_[sb].generation});
+  }
+  return out;
 }
 
 void World::remove_body(BodyId id) {

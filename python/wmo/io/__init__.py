@@ -97,13 +97,19 @@ def load_obj(path: Union[str, "os.PathLike[str]"], **options: Any) -> LoadResult
 
 
 def save(world: World, path: Union[str, "os.PathLike[str]"], **options: Any) -> None:
-    """Writes ``world`` to ``path``: .usda/.usdc/.usd through :func:`wmo.io.usd_writer.save_usd`
-    (``steps=N`` also records a run as time samples). OBJ export is not written yet
-    (ValueError), nor any other suffix."""
+    """Writes ``world`` to ``path``, the format from its suffix: .usda/.usdc/.usd through
+    :func:`wmo.io.usd_writer.save_usd` (a UsdPhysics stage that loads back bit for bit;
+    ``steps=N`` also records a run as time samples), .obj through
+    :func:`wmo.io.obj_writer.save_obj` (the world's current geometry, one object per
+    body; ``up="z"`` for Z-up tools). Another suffix raises ValueError naming it."""
     suffix = Path(path).suffix.lower()
     if suffix in (".usd", ".usda", ".usdc"):
         from .usd_writer import save_usd
         save_usd(world, path, **options)
         return
-    raise ValueError(f"cannot save to {os.fspath(path)!r}: the suffix must be .usda, .usdc or .usd "
-                     f"(OBJ export is not written yet)")
+    if suffix in _OBJ_SUFFIXES:
+        from .obj_writer import save_obj
+        save_obj(world, path, **options)
+        return
+    raise ValueError(f"cannot save to {os.fspath(path)!r}: unknown suffix {suffix!r}; "
+                     f"expected .usda, .usdc, .usd or .obj")

@@ -73,7 +73,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from .. import _core as wmo
-from . import LoadResult, SceneFileNotFoundError, SceneFormatError
+from . import LoadResult, SceneFileNotFoundError, SceneFormatError, usd_exact
 from .obj import convex_decomposition, drop_degenerate, make_hull, quat_from_matrix
 
 try:  # pxr is optional for the package; load_usd says how to get it.
@@ -477,6 +477,14 @@ def load_usd(path: Union[str, "os.PathLike[str]"], *, meters_per_unit: Optional[
 
     _check_schemas(stage, warnings)
     gravity = _gravity(stage, up, mpu, warnings)
+    scenes = [p for p in stage.Traverse() if p.IsA(UsdPhysics.Scene)]
+    if scenes:  # a stage WMO wrote: its exact gravity and World settings
+        exact_g, settings, same = usd_exact.read_scene(scenes[0])
+        if exact_g is not None:
+            gravity = exact_g
+        elif settings:
+            warnings.append(f"{scenes[0].GetPath()}: gravity edited after WMO wrote it: the schema's used")
+        world_options = {**settings, **world_options}
     cache = UsdGeom.XformCache(Usd.TimeCode.Default())
 
     # Rigid bodies and colliders; each collider belongs to its nearest rigid-body ancestor.
@@ -534,7 +542,7 @@ def load_usd(path: Union[str, "os.PathLike[str]"], *, meters_per_unit: Optional[
     def add(key: str, prim: "Usd.Prim", xf: _Xf, shape_parts, concave, kind: str, mass, density, mat,
             lin=None, ang=None, given=None) -> Optional[wmo.Body]:
         if concave is not None:
-            shape, r, t = concave, np.eye(3), np.zeros(3)
+            shape, r, t = concave
         elif shape_parts:
             shape, r, t = assemble(shape_parts)
         else:
@@ -587,25 +595,36 @@ def load_usd(path: Union[str, "os.PathLike[str]"], *, meters_per_unit: Optional[
                 _warn_prim(warnings, prim, "kinematic animation (time samples) ignored: initial pose used")
         if bool(_get(api.GetStartsAsleepAttr(), False)):
             _warn_prim(warnings, prim, "startsAsleep ignored (bodies start awake)")
-        xf = _decompose(prim, cache, mpu, warnings)
         cols = colliders.get(key, [])
+        exact, has_exact = usd_exact.read_body(prim, cols, kind) if mpu == 1.0 else (None, False)
+        if exact is not None:
+            shape, kwargs = exact
+            try:
+                b = w.add_body(shape, **kwargs)
+            except ValueError as e:
+                raise _fail(prim, f"cannot add the body: {e}") from None
+            bodies[key], specs[key], owner[key], body_colliders[key] = b, dict(kwargs, shape=shape), b, cols
+            owner.update((str(c.GetPath()), b) for c in cols)
+            continue
+        if has_exact:
+            _warn_prim(warnings, prim, "edited after WMO wrote it: its wmo: exact values are ignored, "
+                                       "the schema's used")
+        xf = _decompose(prim, cache, mpu, warnings)
         parts: List[_Part] = []
+        concave = None
         for c in cols:
             cxf = _decompose(c, cache, mpu, warnings) if c != prim else xf
             geo = _collider_geometry(c, cxf, mpu, kind == "static", opts, warnings)
+            rel_r = xf.rotation.T @ cxf.rotation
+            rel_t = xf.rotation.T @ (cxf.translation - xf.translation)
             if geo.concave is not None:
-                if len(cols) == 1 and kind == "static" and c == prim:
-                    parts = []
-                    concave = geo.concave
+                if len(cols) == 1 and kind == "static":
+                    concave = (geo.concave, rel_r, rel_t)
                     break
                 _warn_prim(warnings, c, "non-convex collider cannot join a compound body: ignored")
                 continue
-            rel_r = xf.rotation.T @ cxf.rotation
-            rel_t = xf.rotation.T @ (cxf.translation - xf.translation)
             for sh, r, t in geo.parts:
                 parts.append((sh, rel_r @ r, rel_t + rel_r @ t))
-        else:
-            concave = None
         given: Dict[str, Any] = {}
         b_mass, b_density = _mass_api(prim, kpu, mpu, warnings, given)
         c_mass = c_density = None
@@ -639,7 +658,8 @@ def load_usd(path: Union[str, "os.PathLike[str]"], *, meters_per_unit: Optional[
         xf = _decompose(c, cache, mpu, warnings)
         geo = _collider_geometry(c, xf, mpu, True, opts, warnings)
         _mass_api(c, kpu, mpu, warnings)  # warn about ignored mass properties; static bodies have no mass
-        b = add(key, c, xf, geo.parts, geo.concave, "static", None, None, material_props([c], c))
+        concave = (geo.concave, np.eye(3), np.zeros(3)) if geo.concave is not None else None
+        b = add(key, c, xf, geo.parts, concave, "static", None, None, material_props([c], c))
         if b is not None:
             owner[key] = b
             body_colliders[key] = [c]
@@ -677,7 +697,14 @@ def load_usd(path: Union[str, "os.PathLike[str]"], *, meters_per_unit: Optional[
     group_index: Dict[str, int] = {}
     if groups:
         merged: Dict[str, int] = {}
-        for g in groups:
+        # A stage WMO wrote names its groups' WMO numbers; used when they are all there,
+        # distinct and in range (a group number decides nothing but filtering, so
+        # otherwise the groups are simply numbered 1, 2, ...).
+        wmo_index = [g.GetAttribute("wmo:index").Get() if g.HasAttribute("wmo:index") else None for g in groups]
+        if (all(isinstance(i, int) and 0 <= i <= MAX_COLLISION_GROUPS for i in wmo_index)
+                and len(set(wmo_index)) == len(groups)):
+            group_index = {str(g.GetPath()): i for g, i in zip(groups, wmo_index)}
+        for g in groups if not group_index else ():
             merge = str(_get(UsdPhysics.CollisionGroup(g).GetMergeGroupNameAttr(), "") or "")
             if merge and merge in merged:
                 group_index[str(g.GetPath())] = merged[merge]

@@ -23,10 +23,14 @@ plugin, :mod:`wmo.io.usd`) needs to simulate the same scene:
 - collision groups (``PhysicsCollisionGroup`` under ``/World/CollisionGroups``, their
   colliders in the ``colliders`` collection, ``filteredGroups`` for each pair of groups
   the world does not let collide);
-- custom ``wmo:`` attributes on each body prim with the exact float64 values the schema
-  stores as float (friction, restitution, damping, gravity scale, mass, centre of mass,
-  inertia tensor, velocities in rad/s, collision group, CCD), so that a world saved and
-  loaded by WMO simulates bit for bit as the original; other readers ignore them.
+- filtered body pairs (``PhysicsFilteredPairsAPI`` on the first body of each pair);
+- custom ``wmo:`` attributes with the exact float64 values (poses, shapes, masses,
+  materials, velocities, the World's settings; see :mod:`wmo.io.usd_exact`), so that a
+  world saved and loaded by WMO simulates bit for bit as the original; other readers
+  ignore them.
+
+A static body is a rigid body with ``rigidBodyEnabled = false`` (UsdPhysics' static
+body), so that each WMO body is one prim, compound or not, in row order.
 
 With ``steps``, the world is also simulated that many steps and each body's pose is
 written as time samples (time codes are steps, ``timeCodesPerSecond`` = 1 / dt), so the
@@ -41,6 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import _core
+from . import usd_exact
 from .obj import quat_from_matrix
 
 __all__ = ["save_usd"]
@@ -144,6 +149,7 @@ def save_usd(world: _core.World, path: str | os.PathLike, *, steps: int = 0) -> 
     mag = float(np.linalg.norm(g))
     scene.CreateGravityDirectionAttr(Gf.Vec3f(*(g / mag if mag > 0 else np.array([0.0, -1.0, 0.0])).tolist()))
     scene.CreateGravityMagnitudeAttr(mag)
+    usd_exact.write_scene(scene.GetPrim(), world)
 
     materials: dict[tuple[float, float], Sdf.Path] = {}
     group_members: dict[int, list[Sdf.Path]] = {}
@@ -158,8 +164,10 @@ def save_usd(world: _core.World, path: str | os.PathLike, *, steps: int = 0) -> 
         o_op.Set(_quatd(Gf, world.orientations[k]))
         xform_ops.append((t_op, o_op))
         prim = xf.GetPrim()
-        if body.kind != "static":
-            rb = UsdPhysics.RigidBodyAPI.Apply(prim)
+        rb = UsdPhysics.RigidBodyAPI.Apply(prim)
+        if body.kind == "static":  # a disabled rigid body is static, and keeps the body one prim
+            rb.CreateRigidBodyEnabledAttr(False)
+        else:
             rb.CreateKinematicEnabledAttr(body.kind == "kinematic")
             rb.CreateVelocityAttr(Gf.Vec3f(*map(float, world.linear_velocities[k])))
             rb.CreateAngularVelocityAttr(Gf.Vec3f(*map(math.degrees, world.angular_velocities[k])))
@@ -170,31 +178,16 @@ def save_usd(world: _core.World, path: str | os.PathLike, *, steps: int = 0) -> 
             moments, axes = _principal_axes(np.asarray(body.inertia))
             mass.CreateDiagonalInertiaAttr(Gf.Vec3f(*map(float, moments)))
             mass.CreatePrincipalAxesAttr(Gf.Quatf(float(axes[3]), Gf.Vec3f(*map(float, axes[:3]))))
-        # The exact values, in double precision (the schema's attributes are float, which
-        # would change a round trip's simulation): read first by wmo.io.usd, ignored by
-        # other readers.
-        exact = {"friction": (Sdf.ValueTypeNames.Double, float(body.friction)),
-                 "restitution": (Sdf.ValueTypeNames.Double, float(body.restitution)),
-                 "linearDamping": (Sdf.ValueTypeNames.Double, float(body.linear_damping)),
-                 "angularDamping": (Sdf.ValueTypeNames.Double, float(body.angular_damping)),
-                 "gravityScale": (Sdf.ValueTypeNames.Double, float(body.gravity_scale)),
-                 "collisionGroup": (Sdf.ValueTypeNames.Int, int(body.collision_group)),
-                 "ccd": (Sdf.ValueTypeNames.Bool, bool(body.ccd)),
-                 "linearVelocity": (Sdf.ValueTypeNames.Double3, Gf.Vec3d(*map(float, world.linear_velocities[k]))),
-                 "angularVelocity": (Sdf.ValueTypeNames.Double3, Gf.Vec3d(*map(float, world.angular_velocities[k])))}
-        if body.kind == "dynamic":
-            exact["mass"] = (Sdf.ValueTypeNames.Double, float(body.mass))
-            exact["centerOfMass"] = (Sdf.ValueTypeNames.Double3, Gf.Vec3d(*map(float, body.center_of_mass)))
-            exact["inertia"] = (Sdf.ValueTypeNames.Matrix3d, Gf.Matrix3d(*np.asarray(body.inertia, dtype=float).ravel()))
-        for name, (type_name, value) in exact.items():
-            prim.CreateAttribute(f"wmo:{name}", type_name, custom=True).Set(value)
         shape = body.shape
         if isinstance(shape, _core.Compound):
-            colliders = [_write_collider(stage, f"{bpath}/geom_{j}", child, UsdGeom, UsdPhysics, Gf, Vt,
-                                         (pose.position, pose.orientation))
-                         for j, (child, pose) in enumerate(shape.children)]
+            colliders = []
+            for j, (child, pose) in enumerate(shape.children):
+                colliders.append(_write_collider(stage, f"{bpath}/geom_{j}", child, UsdGeom, UsdPhysics, Gf, Vt,
+                                                 (pose.position, pose.orientation)))
+                usd_exact.write_collider(colliders[-1], child, pose)
         else:
             colliders = [_write_collider(stage, f"{bpath}/geom", shape, UsdGeom, UsdPhysics, Gf, Vt)]
+            usd_exact.write_collider(colliders[0], shape)
         key = (float(body.friction), float(body.restitution))
         if key not in materials:
             mpath = Sdf.Path(f"/World/Materials/material_{len(materials)}")
@@ -208,6 +201,11 @@ def save_usd(world: _core.World, path: str | os.PathLike, *, steps: int = 0) -> 
         for c in colliders:
             UsdShade.MaterialBindingAPI.Apply(c).Bind(mat, UsdShade.Tokens.weakerThanDescendants, "physics")
         group_members.setdefault(int(body.collision_group), []).extend(c.GetPath() for c in colliders)
+        usd_exact.write_body(prim, world, k)
+
+    for a, b in world.filtered_pairs():
+        api = UsdPhysics.FilteredPairsAPI.Apply(stage.GetPrimAtPath(f"/World/body_{a.index}"))
+        api.CreateFilteredPairsRel().AddTarget(Sdf.Path(f"/World/body_{b.index}"))
 
     # Collision groups, only where the world filters some pair of groups.
     groups = sorted(group_members)
@@ -216,6 +214,7 @@ def save_usd(world: _core.World, path: str | os.PathLike, *, steps: int = 0) -> 
         paths = {}
         for gi in groups:
             grp = UsdPhysics.CollisionGroup.Define(stage, f"/World/CollisionGroups/group_{gi}")
+            grp.GetPrim().CreateAttribute("wmo:index", Sdf.ValueTypeNames.Int, custom=True).Set(gi)
             coll = Usd.CollectionAPI.Apply(grp.GetPrim(), "colliders")
             for p in group_members[gi]:
                 coll.GetIncludesRel().AddTarget(p)

@@ -379,7 +379,36 @@ TEST(WorldFiltering, FilteredPairAndGroupsGetNoContact) {
     const Real y = w.positions()[w.index_of(upper)].y();
     EXPECT_NEAR(y, mode == 0 ? 1.5 : 0.5, 0.02) << "mode " << mode;
     EXPECT_EQ(w.filtered_pair_count(), mode == 1 ? 1 : 0);
+    if (mode == 1) {  // listed once, lower slot first
+      const auto pairs = w.filtered_pairs();
+      ASSERT_EQ(pairs.size(), 1u);
+      EXPECT_EQ(pairs[0].first, lower);
+      EXPECT_EQ(pairs[0].second, upper);
+    }
   }
+}
+
+TEST(WorldBodies, GivenInertiaTensorAndMassAreTakenExactly) {
+  // A saved body's mass data comes back bit for bit (wmo.io's round trip).
+  World w;
+  BodyDef d = box_def({0.3, 0.2, 0.1}, {0, 2, 0});
+  d.mass = 0.1 * 3;  // not exactly 0.3: rescaling the shape's mass by it would round
+  const BodyMass a = compute_body_mass(d);
+  EXPECT_EQ(a.mass, 0.1 * 3);
+  Mat3 tensor;
+  tensor << 2, 0.5, 0, 0.5, 3, 0.25, 0, 0.25, 4;
+  d.inertia_tensor = tensor;
+  EXPECT_EQ(compute_body_mass(d).inertia_local, tensor);
+  BodyDef asym = d;
+  asym.inertia_tensor(0, 1) = 0.6;
+  EXPECT_THROW(w.add_body(asym), InvalidArgument);
+  BodyDef both = d;
+  both.inertia = Vec3(1, 1, 1);
+  EXPECT_THROW(w.add_body(both), InvalidArgument);
+  BodyDef flat = d;
+  flat.inertia_tensor = Vec3(1, 1, 3).asDiagonal();  // 3 > 1 + 1
+  EXPECT_THROW(w.add_body(flat), InvalidArgument);
+  EXPECT_EQ(w.body_count(), 0);
 }
 
 TEST(WorldFiltering, BadGroupsThrowAndChangeNothing) {

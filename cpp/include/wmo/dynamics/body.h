@@ -64,6 +64,11 @@ struct BodyDef {
   /// Orientation of the principal axes in the shape's local frame (unit quaternion);
   /// used with `inertia`. (MassAPI principalAxes.)
   Quat inertia_axes = Quat::Identity();
+  /// The full inertia tensor about the centre of mass (kg m^2, shape local frame):
+  /// symmetric, its eigenvalues principal moments as for `inertia`. NaN (the default)
+  /// means not given; it cannot be given together with `inertia`. Taken bit for bit,
+  /// so that a saved body (Body's inertia_local) is restored exactly.
+  Mat3 inertia_tensor = Mat3::Constant(std::numeric_limits<Real>::quiet_NaN());
 };
 
 /// Number of collision groups (BodyDef::collision_group): one bit each in a 64-bit mask.

@@ -284,6 +284,9 @@ class World {
   bool pair_collision(BodyId a, BodyId b) const;
   /// Number of filtered body pairs.
   int filtered_pair_count() const { return static_cast<int>(filtered_pairs_.size()); }
+  /// The filtered body pairs (set_pair_collision(a, b, false)), each once, in a fixed
+  /// order (by handle slot): what a saved world must write to be restored.
+  std::vector<std::pair<BodyId, BodyId>> filtered_pairs() const;
 
   /// Applies an impulse (N s, world) at a world point (m) to a dynamic body; other
   /// kinds ignore it. Applies a force / torque for the next step only.
