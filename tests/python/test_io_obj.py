@@ -6,6 +6,8 @@ volumes. Malformed text must raise ValueError naming the line, never anything el
 """
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -189,3 +191,34 @@ def test_random_obj_text_loads_or_raises_value_error(tmp_path_factory, lines, as
     except ValueError:
         return
     assert len(r.bodies) == 1
+
+
+def test_absurd_obj_lines_raise_with_bounded_memory(tmp_path):
+    # Indices and numbers far beyond the file's data: refused (ValueError naming the
+    # line) under a 2 GiB address-space limit, so nothing tries to allocate what they claim.
+    cases = {"index.obj": "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99999999999999999999999\n",
+             "negative.obj": "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 -4000000000\n",
+             "overflow.obj": "v 0 0 0\nv 1e400 0 0\nv 0 1 0\nf 1 2 3\n",
+             "huge.obj": "v 0 0 0\nv 1e308 0 0\nv 0 1e308 0\nv 0 0 1e308\nf 1 2 3\nf 1 3 4\nf 1 4 2\nf 2 4 3\n"}
+    for name, text in cases.items():
+        (tmp_path / name).write_text(text)
+    script = f"""
+import resource
+resource.setrlimit(resource.RLIMIT_AS, (2 << 30, 2 << 30))
+import wmo.io
+for name, as_ in [(n, a) for n in {sorted(cases)!r} for a in ("static_mesh", "convex_hull")]:
+    try:
+        wmo.io.load({str(tmp_path)!r} + "/" + name, as_=as_)
+    except ValueError as e:
+        print(name, as_, "ValueError", str(e)[:200])
+    else:
+        print(name, as_, "LOADED")
+"""
+    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    out = r.stdout.splitlines()
+    assert len(out) == 8, r.stdout
+    for line in out:
+        name, as_, verdict = line.split(" ", 2)
+        assert verdict.startswith("ValueError") and (f"{name}:4" in verdict or f"{name}:2" in verdict), line
+    assert "beyond +-1e+15" in [v for v in out if v.startswith("huge.obj")][0]

@@ -7,6 +7,8 @@ conversions field by field; bad files must raise ValueError naming the prim or p
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -441,3 +443,77 @@ def test_missing_file_and_unknown_suffix(tmp_path):
         wmo.io.load(tmp_path / "nope.usda")
     with pytest.raises(ValueError, match=r"\.fbx"):
         wmo.io.load(tmp_path / "scene.fbx")
+
+
+_ABSURD_USD = {
+    # A face claiming 2^31 - 1 corners over 3 indices: refused before any array of that size.
+    "huge_face.usda": """#usda 1.0
+def Mesh "Bad" (prepend apiSchemas = ["PhysicsCollisionAPI"])
+{
+    point3f[] points = [(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1)]
+    int[] faceVertexCounts = [2147483647]
+    int[] faceVertexIndices = [0, 1, 2]
+}
+""",
+    # Counts that overflow 32 bits when summed.
+    "overflow.usda": """#usda 1.0
+def Mesh "Bad" (prepend apiSchemas = ["PhysicsCollisionAPI"])
+{
+    point3f[] points = [(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1)]
+    int[] faceVertexCounts = [2147483647, 2147483647, 6]
+    int[] faceVertexIndices = [0, 1, 2, 0, 2, 3]
+}
+""",
+    # A negative count.
+    "negative.usda": """#usda 1.0
+def Mesh "Bad" (prepend apiSchemas = ["PhysicsCollisionAPI"])
+{
+    point3f[] points = [(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1)]
+    int[] faceVertexCounts = [-2147483648, 3]
+    int[] faceVertexIndices = [0, 1, 2]
+}
+""",
+    # 200 collision groups: WMO has 63.
+    "groups.usda": "#usda 1.0\n" + "".join(f'def PhysicsCollisionGroup "G{i}" {{}}\n' for i in range(200)),
+    # A body far beyond float range after the stage's units.
+    "far.usda": """#usda 1.0
+(
+    metersPerUnit = 1e300
+)
+def Cube "Bad" (prepend apiSchemas = ["PhysicsCollisionAPI", "PhysicsRigidBodyAPI"])
+{
+    double size = 1e300
+    double3 xformOp:translate = (1e300, 0, 0)
+    uniform token[] xformOpOrder = ["xformOp:translate"]
+}
+""",
+}
+
+
+def test_absurd_counts_raise_with_bounded_memory(tmp_path):
+    # Each file names sizes far beyond its data; the reader must refuse it (ValueError
+    # naming the prim) without trying to allocate them. Run under a 2 GiB address-space
+    # limit (importing pxr, NumPy and WMO takes ~0.7 GiB of it), so an attempt to
+    # allocate what the counts claim fails the test instead of swapping the machine.
+    for name, text in _ABSURD_USD.items():
+        (tmp_path / name).write_text(text)
+    script = f"""
+import resource, sys
+resource.setrlimit(resource.RLIMIT_AS, (2 << 30, 2 << 30))
+import wmo.io
+for name in {sorted(_ABSURD_USD)!r}:
+    try:
+        wmo.io.load({str(tmp_path)!r} + "/" + name)
+    except ValueError as e:
+        print(name, "ValueError", str(e)[:300])
+    else:
+        print(name, "LOADED")
+"""
+    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    lines = dict(line.split(" ", 1) for line in r.stdout.splitlines())
+    assert sorted(lines) == sorted(_ABSURD_USD), r.stdout
+    for name in ("huge_face.usda", "overflow.usda", "negative.usda"):
+        assert lines[name].startswith("ValueError") and "/Bad" in lines[name], (name, lines[name])
+    assert lines["groups.usda"].startswith("ValueError") and "collision groups" in lines["groups.usda"]
+    assert lines["far.usda"].startswith("ValueError") and "/Bad" in lines["far.usda"], lines["far.usda"]

@@ -5,7 +5,7 @@ negative indices count back from the last vertex; polygons are fan-triangulated)
 ``o`` / ``g`` group names (they split the mesh into parts). Texture coordinates,
 normals, materials (``mtllib``, ``usemtl``; the .mtl file is never opened, so a missing
 one is fine), smoothing groups, lines and points are skipped. Any other keyword, a
-malformed number, a NaN or infinite coordinate or a face index out of range raises
+malformed number, a NaN or infinite coordinate (or one beyond 1e15), a face index out of range raises
 :class:`wmo.io.SceneFormatError` (a ``ValueError``) naming the file and the line.
 
 The file is parsed here rather than through trimesh because trimesh skips malformed
@@ -52,6 +52,10 @@ __all__ = ["load_obj", "ObjMesh", "parse_obj"]
 MAX_VERTICES = 20_000_000
 MAX_TRIANGLES = 40_000_000
 MAX_FILE_BYTES = 2_000_000_000
+# Coordinates beyond this (file units) are refused: products of two of them (areas,
+# normals, volumes) must stay far from float64 overflow, and no scene in metres,
+# millimetres or microns comes near it.
+MAX_COORDINATE = 1e15
 
 _SKIPPED_KEYWORDS = {"vt", "vn", "vp", "mtllib", "usemtl", "s", "l", "p", "cstype", "deg",
                      "bmat", "step", "curv", "curv2", "surf", "parm", "trim", "hole",
@@ -115,6 +119,9 @@ def parse_obj(path: Union[str, "os.PathLike[str]"]) -> ObjMesh:
                 raise SceneFormatError(f"{name}:{lineno}: bad number in {line!r}") from None
             if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
                 raise SceneFormatError(f"{name}:{lineno}: vertex is not finite: {line!r}")
+            if max(abs(x), abs(y), abs(z)) > MAX_COORDINATE:
+                raise SceneFormatError(f"{name}:{lineno}: vertex coordinate beyond +-{MAX_COORDINATE:g} "
+                                       f"(file units): {line!r}")
             if len(verts) >= MAX_VERTICES:
                 raise SceneFormatError(f"{name}:{lineno}: more than {MAX_VERTICES} vertices")
             verts.append((x, y, z))

@@ -230,7 +230,19 @@ def _mesh_arrays(prim: "Usd.Prim") -> Tuple[np.ndarray, np.ndarray]:
 
 def _collider_geometry(prim: "Usd.Prim", xf: _Xf, mpu: float, static: bool, opts: Dict[str, Any],
                        warnings: List[str]) -> _Geometry:
-    """The WMO shapes of one collider prim, in its frame (scale applied, metres)."""
+    """The WMO shapes of one collider prim, in its frame (scale applied, metres); a
+    shape WMO refuses (an infinite size after units and scale, ...) raises
+    SceneFormatError naming the prim."""
+    try:
+        return _collider_shapes(prim, xf, mpu, static, opts, warnings)
+    except SceneFormatError:
+        raise
+    except ValueError as e:
+        raise _fail(prim, str(e)) from None
+
+
+def _collider_shapes(prim: "Usd.Prim", xf: _Xf, mpu: float, static: bool, opts: Dict[str, Any],
+                     warnings: List[str]) -> _Geometry:
     s = np.abs(xf.scale)
     path = str(prim.GetPath())
     eye, zero = np.eye(3), np.zeros(3)

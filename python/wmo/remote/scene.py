@@ -16,13 +16,16 @@ client is re-created as kinematic). Snapshots list bodies in ascending id order.
 from __future__ import annotations
 
 import math
+import os
+from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
 
 from .. import _core, scenes
 
-__all__ = ["EditError", "SceneModel", "OPS", "SETTINGS", "SCENE_BUILDERS", "shape_from_spec", "shape_to_spec"]
+__all__ = ["EditError", "SceneModel", "OPS", "SETTINGS", "SCENE_BUILDERS", "register_file_scene", "shape_from_spec",
+           "shape_to_spec"]
 
 #: World settings a client may set (load_scene, set_settings), with their types.
 SETTINGS: dict[str, type] = {
@@ -223,6 +226,55 @@ SCENE_BUILDERS: dict[str, Callable[[], tuple[dict, list[dict]]]] = {
     "pyramid": lambda: _box_scene(scenes.pyramid_spec()),
     "tower": _tower,
 }
+
+
+SCENE_FILE_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz", ".obj")
+
+
+def register_file_scene(path: "str | os.PathLike[str]") -> tuple[str, list[str]]:
+    """Reads a scene file (USD or OBJ, through :func:`wmo.io.load`) and makes it a scene
+    a server can host, reset to and ``load_scene`` by name: ``"file:<absolute path>"``.
+    Only files the server's operator registers can be loaded (a client cannot make the
+    server read a path of its choosing). Returns (name, warnings): the reader's warnings,
+    plus one per body property a remote scene does not carry (given centre of mass and
+    inertia, collision groups, filtered pairs). Raises ValueError for an unreadable file
+    or a compound body (remote scenes have no compounds yet)."""
+    from .. import io
+
+    p = Path(path).resolve()
+    result = io.load(p)
+    warnings = list(result.warnings)
+    bodies = []
+    for key, spec in result.specs.items():
+        try:
+            shape = shape_to_spec(spec["shape"])
+        except TypeError as e:
+            raise ValueError(f"{p}: body {key}: {e}") from None
+        d: dict[str, Any] = {"shape": shape}
+        for k in (*BODY_FIELDS, "position", "orientation", "linear_velocity", "angular_velocity"):
+            if spec.get(k) is not None:
+                v = spec[k]
+                d[k] = np.asarray(v, dtype=float).tolist() if isinstance(v, (list, tuple, np.ndarray)) else v
+        dropped = []
+        body = result.bodies[key]
+        if body.kind == "dynamic" and any(spec.get(k) is not None for k in ("center_of_mass", "inertia")):
+            # Given mass data that is the shape's own (as wmo.io.save writes it) is not lost.
+            own = spec["shape"].mass_properties(1.0)
+            if not (np.allclose(body.center_of_mass, own.center_of_mass, rtol=1e-9, atol=1e-12)
+                    and np.allclose(body.inertia, np.asarray(own.inertia) * (body.mass / own.mass), rtol=1e-9)):
+                dropped += ["center_of_mass", "inertia"]
+        if spec.get("collision_group"):
+            dropped.append("collision_group")
+        if dropped:
+            warnings.append(f"{key}: {', '.join(dropped)} not carried by remote scenes: the shape's own used")
+        bodies.append(d)
+    if result.world.filtered_pairs():
+        warnings.append(f"{p}: filtered pairs not carried by remote scenes: ignored")
+    ws = result.world.settings
+    settings = {k: (np.asarray(ws[k]).tolist() if k == "gravity" else ws[k]) for k in SETTINGS}
+    name = f"file:{p}"
+    SCENE_BUILDERS[name] = lambda: (dict(settings), [dict(b) for b in bodies])
+    return name, warnings
 
 
 class SceneModel:

@@ -39,7 +39,7 @@ from websockets.asyncio.server import serve
 from websockets.exceptions import ConnectionClosed
 
 from .journal import SceneStore
-from .scene import SCENE_BUILDERS, EditError, SceneModel
+from .scene import SCENE_BUILDERS, SCENE_FILE_SUFFIXES, EditError, SceneModel, register_file_scene
 from .snapshot import Snapshot, SnapshotEncoder
 
 __all__ = ["Server", "SceneHost", "PROTOCOL_VERSION", "ServerLimits"]
@@ -265,8 +265,9 @@ class ClientConn:
 
 class Server:
     """A WMO server. ``scenes`` maps names to the scene each starts as (a name of
-    ``SCENE_BUILDERS``: empty, boxes3000, pyramid, tower), unless ``data_dir`` holds it
-    already, in which case it is restored from there.
+    ``SCENE_BUILDERS``: empty, boxes3000, pyramid, tower; or the path of a USD or OBJ
+    file, read once at start, see :func:`wmo.remote.scene.register_file_scene`), unless
+    ``data_dir`` holds it already, in which case it is restored from there.
 
     host, port: where to listen (loopback by default; port 0 picks a free one).
     token: clients must present it; None means no token on loopback, and a fresh random
@@ -296,9 +297,13 @@ class Server:
         self.limits = limits or ServerLimits()
         self.scenes: dict[str, SceneHost] = {}
         self._initial = dict(scenes or {"default": "empty"})
-        for name, base in self._initial.items():
+        for name, base in list(self._initial.items()):
             self._check_name(name)
-            if base not in SCENE_BUILDERS:
+            if Path(base).suffix.lower() in SCENE_FILE_SUFFIXES:  # a scene file: read once, now
+                self._initial[name], warnings = register_file_scene(base)
+                for w in warnings:
+                    log.warning("scene %s: %s", name, w)
+            elif base not in SCENE_BUILDERS:
                 raise ValueError(f"scene {name!r}: base must be one of {', '.join(SCENE_BUILDERS)}, got {base!r}")
         self._loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
