@@ -112,6 +112,43 @@ def test_energy_never_increases_from_one_step_to_the_next():
         e = e_next
 
 
+@pytest.mark.xfail(strict=True, reason=(
+    "issue 3, open: a body pivoting on one contact point gains energy: +0.43 J in 17 s on 0.5 J of "
+    "swing (friction 0.5), +1.1 J frictionless. Cause, found: the velocity rows keep the step's "
+    "starting anchors for all 4 substeps (as Box2D v3) while the separation turns them with the "
+    "body, so the row holds a point the body has turned away from and the next push-out gains "
+    "energy (1 substep: +0.0004 J). Turning the anchors in the normal rows too (with their "
+    "effective mass) removes it (+0.7 mJ) and also fixes the closed-box energy test, but breaks "
+    "spinning round bodies (a sphere turning 8 rad a step has its anchor carried off the contact: "
+    "8 mm sinking in test_ccd) and lets the 8-substep tower sway loose at 1 iteration: a contact "
+    "on a smooth surface is not a material point. Needs vertex and smooth contacts told apart"))
+@pytest.mark.parametrize("friction", [0.5, 0.0])
+def test_a_body_swinging_on_one_contact_point_gains_no_energy(friction):
+    # A cube (10 kg, 25 cm) with its centre of mass 0.48 m beyond one corner, hanging
+    # from that corner on the ground: a pendulum on a one-point contact, given 0.5
+    # rad/s (0.5 J of swing). Nothing may add energy: bound 5 mJ, 1% of the swing.
+    w = wmo.World(gravity=(0, 0, -9.81), sleeping=False)
+    w.add_body(wmo.Box((7.5, 7.5, 0.075)), position=(0, 0, -0.075), kind="static", friction=friction)
+    d = np.array([1.0, 1.0, 1.0]) / np.sqrt(3)  # the corner's diagonal, turned to point down
+    axis = np.cross(d, [0, 0, -1.0])
+    q = np.array([*axis, 1 + d @ [0, 0, -1.0]])
+    q /= np.linalg.norm(q)
+    corner = _rotation(q) @ np.full(3, 0.125)
+    b = w.add_body(wmo.Box((0.125,) * 3), position=-corner, orientation=q, mass=10.0,
+                   center_of_mass=(0.4, 0.4, 0.4), friction=friction, angular_velocity=(0.5, 0, 0))
+
+    def energy():
+        com = b.position + _rotation(b.orientation) @ b.center_of_mass
+        return w.kinetic_energy() + 10 * 9.81 * com[2]
+
+    w.step(60)
+    e0 = energy()
+    for _ in range(17):
+        w.step(60)
+        assert w.contact_count == 1  # one corner all along
+        assert energy() - e0 < 0.005
+
+
 def _tilt_degrees(q):
     # Angle between a box's up axis and the world's (q is x, y, z, w).
     return np.degrees(np.arccos(np.clip(_rotation(q)[1, 1], -1, 1)))
