@@ -491,7 +491,7 @@ def load_usd(path: Union[str, "os.PathLike[str]"], *, meters_per_unit: Optional[
     gravity = _gravity(stage, up, mpu, warnings)
     scenes = [p for p in stage.Traverse() if p.IsA(UsdPhysics.Scene)]
     if scenes:  # a stage WMO wrote: its exact gravity and World settings
-        exact_g, settings, same = usd_exact.read_scene(scenes[0])
+        exact_g, settings = usd_exact.read_scene(scenes[0])
         if exact_g is not None:
             gravity = exact_g
         elif settings:

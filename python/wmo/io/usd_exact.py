@@ -102,21 +102,19 @@ def write_scene(scene_prim, world: "wmo.World") -> None:
     _set(scene_prim, "digest", Sdf.ValueTypeNames.String, schema_digest(scene_prim, subtree=False))
 
 
-def read_scene(scene_prim) -> Tuple[Optional[np.ndarray], Dict[str, Any], bool]:
-    """(exact gravity or None, World settings found, whether the digest matched). The
-    settings have no schema counterpart, so they are returned even when it did not;
-    the gravity only when it did."""
+def read_scene(scene_prim) -> Tuple[Optional[np.ndarray], Dict[str, Any]]:
+    """(exact gravity, or None unless the digest still matches; the World settings
+    found). The settings have no schema counterpart, so they are returned either way."""
     settings = {}
     for a in scene_prim.GetAuthoredAttributes():
         name = a.GetName()
         if name.startswith("wmo:settings:"):
             settings[name[len("wmo:settings:"):]] = a.Get()
-    digest = _get(scene_prim, "digest")
-    if digest is None:
-        return None, settings, False
-    ok = digest == schema_digest(scene_prim, subtree=False)
     g = _get(scene_prim, "gravity")
-    return (_vec(g) if ok and g is not None else None), settings, ok
+    digest = _get(scene_prim, "digest")
+    if g is None or digest is None or digest != schema_digest(scene_prim, subtree=False):
+        return None, settings
+    return _vec(g), settings
 
 
 def write_collider(prim, shape: "wmo.Shape", local_pose: Optional["wmo.Pose"] = None) -> None:
