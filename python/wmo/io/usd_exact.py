@@ -26,10 +26,10 @@ Attributes (all custom, at the default time):
   ``wmo:gravityScale``, ``wmo:collisionGroup``, ``wmo:ccd``, and for a dynamic body
   ``wmo:mass`` (kg), ``wmo:centerOfMass`` (m, shape frame) and ``wmo:inertia`` (matrix3d,
   kg m^2 about the centre of mass, shape frame);
-- a collider prim: ``wmo:shape`` (the WMO type) and its parameters (``wmo:halfExtents``
-  and ``wmo:rounding``; ``wmo:radius``; ``wmo:halfHeight``; ``wmo:points``, double3[]
-  and ``wmo:triangles``, int[]; ``wmo:normal`` and ``wmo:offset``), and for a part of a
-  compound its ``wmo:localPosition`` / ``wmo:localOrientation`` in the body's shape frame;
+- a collider prim: its shape's spec (the form remote scenes use, PROTOCOL.md), one
+  ``wmo:shape:<field>`` attribute per field (``type``, ``half_extents``, ``radius``,
+  ``points`` as double3[], ``triangles`` as int3[], ...), and for a part of a compound
+  its ``wmo:localPosition`` / ``wmo:localOrientation`` in the body's shape frame;
 - a ``PhysicsCollisionGroup``: ``wmo:index``, the WMO group number it stands for.
 """
 from __future__ import annotations
@@ -40,6 +40,7 @@ from typing import Any, Dict, List, Optional, Tuple
 import numpy as np
 
 from .. import _core as wmo
+from ..remote.scene import shape_from_spec, shape_to_spec
 
 __all__ = ["schema_digest", "write_scene", "read_scene", "write_body", "write_collider", "read_body"]
 
@@ -118,26 +119,22 @@ def read_scene(scene_prim) -> Tuple[Optional[np.ndarray], Dict[str, Any]]:
 
 
 def write_collider(prim, shape: "wmo.Shape", local_pose: Optional["wmo.Pose"] = None) -> None:
-    """The exact parameters of ``shape`` (and its pose in a compound) on its collider prim."""
+    """The exact parameters of ``shape`` (its spec, :func:`wmo.remote.scene.shape_to_spec`,
+    one ``wmo:shape:<field>`` attribute per field) and its pose in a compound on its
+    collider prim."""
     from pxr import Gf, Sdf, Vt
 
     T = Sdf.ValueTypeNames
-    _set(prim, "shape", T.String, shape.type)
-    if isinstance(shape, wmo.Box):
-        _set(prim, "halfExtents", T.Double3, Gf.Vec3d(*map(float, shape.half_extents)))
-        _set(prim, "rounding", T.Double, float(shape.rounding))
-    elif isinstance(shape, wmo.Sphere):
-        _set(prim, "radius", T.Double, float(shape.radius))
-    elif isinstance(shape, (wmo.Capsule, wmo.Cylinder)):
-        _set(prim, "radius", T.Double, float(shape.radius))
-        _set(prim, "halfHeight", T.Double, float(shape.half_height))
-    elif isinstance(shape, (wmo.ConvexHull, wmo.TriangleMesh)):
-        _set(prim, "points", T.Double3Array, Vt.Vec3dArray.FromNumpy(np.asarray(shape.vertices, dtype=np.float64)))
-        if isinstance(shape, wmo.TriangleMesh):
-            _set(prim, "triangles", T.IntArray, Vt.IntArray.FromNumpy(np.asarray(shape.triangles, np.int32).ravel()))
-    elif isinstance(shape, wmo.Plane):
-        _set(prim, "normal", T.Double3, Gf.Vec3d(*map(float, shape.normal)))
-        _set(prim, "offset", T.Double, float(shape.offset))
+    for name, value in shape_to_spec(shape).items():
+        if isinstance(value, (str, float)):
+            type_name = T.String if isinstance(value, str) else T.Double
+        elif not isinstance(value[0], list):
+            type_name, value = T.Double3, Gf.Vec3d(*value)
+        elif isinstance(value[0][0], int):  # rows: triangles (int) or points (float)
+            type_name, value = T.Int3Array, Vt.Vec3iArray.FromNumpy(np.asarray(value, dtype=np.int32))
+        else:
+            type_name, value = T.Double3Array, Vt.Vec3dArray.FromNumpy(np.asarray(value, dtype=np.float64))
+        _set(prim, f"shape:{name}", type_name, value)
     if local_pose is not None:
         _set(prim, "localPosition", T.Double3, Gf.Vec3d(*map(float, local_pose.position)))
         _set(prim, "localOrientation", T.Double4, Gf.Vec4d(*map(float, local_pose.orientation)))
@@ -168,21 +165,14 @@ def write_body(prim, world: "wmo.World", k: int) -> None:
 
 
 def _shape(prim) -> Optional["wmo.Shape"]:
-    t = _get(prim, "shape")
-    if t == "box":
-        return wmo.Box(_vec(_get(prim, "halfExtents")), float(_get(prim, "rounding")))
-    if t == "sphere":
-        return wmo.Sphere(float(_get(prim, "radius")))
-    if t in ("capsule", "cylinder"):
-        cls = wmo.Capsule if t == "capsule" else wmo.Cylinder
-        return cls(float(_get(prim, "radius")), float(_get(prim, "halfHeight")))
-    if t == "convex_hull":
-        return wmo.ConvexHull(_vec(_get(prim, "points")))
-    if t == "triangle_mesh":
-        return wmo.TriangleMesh(_vec(_get(prim, "points")), np.array(_get(prim, "triangles"), np.int64).reshape(-1, 3))
-    if t == "plane":
-        return wmo.Plane(_vec(_get(prim, "normal")), float(_get(prim, "offset")))
-    return None
+    """The shape write_collider wrote on ``prim`` (None if it wrote none)."""
+    spec = {}
+    for a in prim.GetAuthoredAttributes():
+        name = a.GetName()
+        if name.startswith("wmo:shape:"):
+            v = a.Get()
+            spec[name[len("wmo:shape:"):]] = v if isinstance(v, (str, float)) else np.asarray(v).tolist()
+    return shape_from_spec(spec, limits=False) if spec else None
 
 
 def read_body(prim, colliders: List[Any], kind: str) -> Tuple[Optional[Tuple["wmo.Shape", Dict[str, Any]]], bool]:

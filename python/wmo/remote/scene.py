@@ -101,10 +101,10 @@ def _quat(name: str, value: Any) -> list[float]:
     return q
 
 
-def _points(name: str, value: Any, cap: int, width: int = 3) -> np.ndarray:
+def _points(name: str, value: Any, cap: int | None, width: int = 3) -> np.ndarray:
     if not isinstance(value, (list, tuple)) or not value:
         raise EditError("bad_args", f"{name} must be a non-empty list of rows")
-    if len(value) > cap:
+    if cap is not None and len(value) > cap:
         raise EditError("limit", f"{name} has {len(value)} rows, more than the cap {cap}")
     try:
         arr = np.array(value, dtype=float)
@@ -125,9 +125,11 @@ def _check_keys(what: str, args: dict, allowed) -> None:
 
 # ---- shapes as plain specs ----
 
-def shape_from_spec(spec: Any) -> _core.Shape:
+def shape_from_spec(spec: Any, *, limits: bool = True) -> _core.Shape:
     """A shape from its spec, e.g. ``{"type": "box", "half_extents": [1, 1, 1]}``
-    (PROTOCOL.md lists the types). Raises EditError naming the bad field."""
+    (PROTOCOL.md lists the types). Raises EditError naming the bad field. ``limits``:
+    apply a scene's caps on hull points and mesh triangles (an edit's; a scene file
+    read by its operator, wmo.io.usd_exact, passes False)."""
     if not isinstance(spec, dict) or not isinstance(spec.get("type"), str):
         raise EditError("bad_args", f"shape must be a dict with a 'type', got {spec!r}"[:200])
     t = spec["type"]
@@ -150,11 +152,11 @@ def shape_from_spec(spec: Any) -> _core.Shape:
             return _core.Cylinder(_positive("shape.radius", spec.get("radius")),
                                   _positive("shape.half_height", spec.get("half_height")))
         if t == "convex_hull":
-            return _core.ConvexHull(_points("shape.points", spec.get("points"), MAX_HULL_POINTS))
+            return _core.ConvexHull(_points("shape.points", spec.get("points"), MAX_HULL_POINTS if limits else None))
         if t == "plane":
             return _core.Plane(_vec("shape.normal", spec.get("normal")), _finite("shape.offset", spec.get("offset", 0.0)))
-        vertices = _points("shape.vertices", spec.get("vertices"), 3 * MAX_MESH_TRIANGLES)
-        tris = _points("shape.triangles", spec.get("triangles"), MAX_MESH_TRIANGLES)
+        vertices = _points("shape.vertices", spec.get("vertices"), 3 * MAX_MESH_TRIANGLES if limits else None)
+        tris = _points("shape.triangles", spec.get("triangles"), MAX_MESH_TRIANGLES if limits else None)
         if (tris != np.round(tris)).any() or tris.min() < 0 or tris.max() >= len(vertices):
             raise EditError("bad_args", f"shape.triangles must index the {len(vertices)} vertices")
         return _core.TriangleMesh(vertices, tris.astype(np.int32))
