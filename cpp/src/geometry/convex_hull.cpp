@@ -718,6 +718,40 @@ ConvexHull::ConvexHull(const std::vector<Vec3>& points) : ConvexShape(ShapeType:
         "points could not be built into a convex hull: the cloud is degenerate within "
         "round-off (" + std::to_string(n) + " distinct points)");
   for (const Vec3& v : vertices_) aabb_.grow(v);
+
+  // What the separating axis test reads (collide_hull_hull.cpp), precomputed once.
+  const int nv = static_cast<int>(vertices_.size());
+  const int nh = static_cast<int>(half_edges_.size());
+  std::vector<int> edge_of_half(nh, -1);
+  edge_arcs_.resize(edges_.size());
+  for (int k = 0; k < static_cast<int>(edges_.size()); ++k) {
+    const int h = edges_[k];
+    const HalfEdge& he = half_edges_[h];
+    edge_of_half[h] = k;
+    edge_of_half[he.twin] = k;
+    edge_arcs_[k] = EdgeArc{he.face, half_edges_[he.twin].face, he.origin, half_edges_[he.next].origin};
+  }
+  std::vector<int> out_half(nv, -1);
+  for (int h = 0; h < nh; ++h) out_half[half_edges_[h].origin] = h;  // the highest per vertex
+  vertex_edge_begin_.assign(nv + 1, 0);
+  vertex_edges_.clear();
+  vertex_edges_.reserve(nh);
+  for (int v = 0; v < nv; ++v) {
+    vertex_edge_begin_[v] = static_cast<int>(vertex_edges_.size());
+    const int h0 = out_half[v];
+    int h = h0;
+    for (int guard = 0; guard < nh; ++guard) {
+      vertex_edges_.push_back(VertexEdge{edge_of_half[h], half_edges_[half_edges_[h].twin].origin});
+      h = half_edges_[half_edges_[h].twin].next;
+      if (h == h0) break;
+    }
+  }
+  vertex_edge_begin_[nv] = static_cast<int>(vertex_edges_.size());
+  vertex_coords_.resize(3 * static_cast<std::size_t>(nv));
+  for (int i = 0; i < nv; ++i)
+    for (int axis = 0; axis < 3; ++axis) vertex_coords_[axis * nv + i] = vertices_[i][axis];
+  for (const Vec3& v : vertices_) vertex_centroid_ += v;
+  vertex_centroid_ /= static_cast<Real>(nv);
 }
 
 std::vector<int> ConvexHull::face_vertices(int f) const {

@@ -211,6 +211,33 @@ class ConvexHull final : public ConvexShape {
   /// Vertex indices of face `f`, CCW seen from outside.
   std::vector<int> face_vertices(int f) const;
 
+  /// Edge k (edges()[k] = half-edge h) as the separating axis test uses it: the
+  /// faces on its two sides (its arc on the Gauss map runs between their normals) and
+  /// its two vertices. Precomputed at construction, so a query reads one 16-byte
+  /// record per edge instead of following half-edge links.
+  struct EdgeArc {
+    int face1;  ///< h's face
+    int face2;  ///< the twin's face
+    int tail;   ///< h's origin
+    int head;   ///< h's destination
+  };
+  const std::vector<EdgeArc>& edge_arcs() const { return edge_arcs_; }
+  /// An edge around a vertex: its index in edges() and the vertex at its other end.
+  struct VertexEdge {
+    int edge;
+    int other;
+  };
+  /// The edges around vertex v, in the order of a walk around it (h0, twin(h0).next,
+  /// ... with h0 the highest-numbered half-edge leaving v): entries
+  /// vertex_edges()[vertex_edge_begin()[v] .. vertex_edge_begin()[v + 1]).
+  const std::vector<VertexEdge>& vertex_edges() const { return vertex_edges_; }
+  const std::vector<int>& vertex_edge_begin() const { return vertex_edge_begin_; }
+  /// Mean of the vertices (m, hull frame): a point inside the hull.
+  const Vec3& vertex_centroid() const { return vertex_centroid_; }
+  /// The vertices' coordinates as three arrays (x, y, z), for vectorised support
+  /// searches: vertex_coords()[axis * vertices().size() + i].
+  const std::vector<Real>& vertex_coords() const { return vertex_coords_; }
+
   Vec3 support(const Vec3& dir) const override { return support_core(dir); }
   Vec3 support_core(const Vec3& dir) const override;
   /// Index of the support vertex.
@@ -225,6 +252,11 @@ class ConvexHull final : public ConvexShape {
   std::vector<HalfEdge> half_edges_;
   std::vector<int> edges_;
   std::vector<std::vector<int>> vertex_neighbors_;  // for hill-climbing support on large hulls
+  std::vector<EdgeArc> edge_arcs_;
+  std::vector<VertexEdge> vertex_edges_;
+  std::vector<int> vertex_edge_begin_;
+  std::vector<Real> vertex_coords_;
+  Vec3 vertex_centroid_ = Vec3::Zero();
   Aabb aabb_;
   Real tolerance_ = 0;
 };
