@@ -86,6 +86,7 @@ struct BroadphaseStats {
   /// at the update that places them, one by one or by a rebuild)
   std::int64_t reinsertions = 0;
   std::int64_t rebuilds = 0;  ///< tree: whole-tree rebuilds since creation (mass moves)
+  std::int64_t refits = 0;    ///< tree: mass moves absorbed by a refit instead (same structure)
   int sweep_axis = -1;      ///< sweep and prune: current sweep axis (0 = x, 1 = y, 2 = z)
   std::int64_t axis_changes = 0;  ///< sweep and prune: sweep axis switches since creation
 };
