@@ -533,18 +533,26 @@ TEST(AabbTree, ReinsertsOnlyWhenLeavingFatBox) {
   bp->validate();
 }
 
+// A tree and the brute-force reference holding the same `n` random boxes of `scene`.
+struct TreeAndReference {
+  std::unique_ptr<Broadphase> tree, brute;
+  std::vector<Aabb> boxes;
+};
+TreeAndReference tree_and_brute_force(Scene& scene, int n) {
+  TreeAndReference r{make_broadphase(BroadphaseType::kAabbTree), make_broadphase(BroadphaseType::kBruteForce), {}};
+  for (int i = 0; i < n; ++i) {
+    r.boxes.push_back(scene.random_body().box());
+    r.tree->create_proxy(r.boxes.back());
+    r.brute->create_proxy(r.boxes.back());
+  }
+  return r;
+}
+
 // Many leaves leaving their boxes at once rebuild the tree; pairs, queries and rays
 // stay exact, before the update (moves pending) and after it.
 TEST(AabbTree, MassMovesRebuildAndStayExact) {
   Scene scene(77, 20.0, Vec3::Zero());
-  auto tree = make_broadphase(BroadphaseType::kAabbTree);
-  auto brute = make_broadphase(BroadphaseType::kBruteForce);
-  std::vector<Aabb> boxes;
-  for (int i = 0; i < 400; ++i) {
-    boxes.push_back(scene.random_body().box());
-    tree->create_proxy(boxes.back());
-    brute->create_proxy(boxes.back());
-  }
+  auto [tree, brute, boxes] = tree_and_brute_force(scene, 400);
   std::vector<ProxyPair> a, b;
   tree->query_pairs(a);
   for (int frame = 0; frame < 5; ++frame) {
@@ -589,14 +597,7 @@ TEST(AabbTree, MassMovesRebuildAndStayExact) {
 // the structure. Pairs stay exact either way.
 TEST(AabbTree, MassMovesRefitWhenCoherentAndRebuildWhenScattered) {
   Scene scene(91, 20.0, Vec3::Zero());
-  auto tree = make_broadphase(BroadphaseType::kAabbTree);
-  auto brute = make_broadphase(BroadphaseType::kBruteForce);
-  std::vector<Aabb> boxes;
-  for (int i = 0; i < 400; ++i) {
-    boxes.push_back(scene.random_body().box());
-    tree->create_proxy(boxes.back());
-    brute->create_proxy(boxes.back());
-  }
+  auto [tree, brute, boxes] = tree_and_brute_force(scene, 400);
   auto move_all = [&](auto&& where) {
     for (int i = 0; i < 400; ++i) {
       boxes[i] = where(i);
