@@ -185,9 +185,14 @@ substeps : soft-step substeps per step (default 4): more give stiffer contacts.
     holds a tower of N unit boxes only if 2 pi f > ~2 N sqrt(g): tall stacks need more
     substeps (30 boxes stand at substeps=8, contact_hertz=120, not at the defaults).
 iterations : velocity iterations per substep (default 1).
-relax_iterations : relax passes per substep (default 1).
+relax_iterations : relax passes per substep, alternately forward and backward over the
+    contacts (default 2).
 contact_hertz, contact_damping_ratio, contact_push_max : the soft contact spring
-    (Hz, ratio, m/s), defaults 30, 10, 3.
+    (Hz, ratio, m/s), defaults 36, 10, 3 (chosen on the pyramid and boxes3000 together:
+    see SolverSettings in contact_solver.h).
+contact_static_hertz_scale : contacts with a static or kinematic body get this many
+    times contact_hertz, under the same cap (default 2, as Box2D v3): the ground
+    carries the whole pile.
 restitution_threshold : approach speed (m/s) below which nothing bounces (default 1).
 speculative_distance : contacts are made this close before touching (m, default 0.04).
 speculative_motion : the margin also grows by this times the distance the pair's
@@ -239,7 +244,7 @@ are zero-copy, writable views; see the module notes on their lifetime.
 )doc")
       .def(py::init([](py::object gravity, double dt, int substeps, int iterations, int relax_iterations,
                        double contact_hertz, double contact_damping_ratio, double contact_push_max,
-                       double restitution_threshold, double speculative_distance, double speculative_motion,
+                       double contact_static_hertz_scale, double restitution_threshold, double speculative_distance, double speculative_motion,
                        double manifold_reuse_distance, double manifold_reuse_angle,
                        const std::string& friction_combine,
                        const std::string& restitution_combine, bool gyroscopic, bool sleeping,
@@ -254,6 +259,7 @@ are zero-copy, writable views; see the module notes on their lifetime.
              s.solver.contact_hertz = contact_hertz;
              s.solver.damping_ratio = contact_damping_ratio;
              s.solver.push_max = contact_push_max;
+             s.solver.static_hertz_scale = contact_static_hertz_scale;
              s.solver.restitution_threshold = restitution_threshold;
              s.speculative_distance = speculative_distance;
              s.speculative_motion = speculative_motion;
@@ -273,8 +279,9 @@ are zero-copy, writable views; see the module notes on their lifetime.
              return std::make_unique<World>(s);
            }),
            py::arg("gravity") = py::none(), py::arg("dt") = 1.0 / 60, py::arg("substeps") = 4,
-           py::arg("iterations") = 1, py::arg("relax_iterations") = 1, py::arg("contact_hertz") = 30.0,
+           py::arg("iterations") = 1, py::arg("relax_iterations") = 2, py::arg("contact_hertz") = 36.0,
            py::arg("contact_damping_ratio") = 10.0, py::arg("contact_push_max") = 3.0,
+           py::arg("contact_static_hertz_scale") = 2.0,
            py::arg("restitution_threshold") = 1.0, py::arg("speculative_distance") = 0.04,
            py::arg("speculative_motion") = 0.0, py::arg("manifold_reuse_distance") = 1e-3,
            py::arg("manifold_reuse_angle") = 2 * kPi / 180,
@@ -413,6 +420,7 @@ field; the world is unchanged. Existing state views may detach (see World).
             d["contact_hertz"] = s.solver.contact_hertz;
             d["contact_damping_ratio"] = s.solver.damping_ratio;
             d["contact_push_max"] = s.solver.push_max;
+            d["contact_static_hertz_scale"] = s.solver.static_hertz_scale;
             d["restitution_threshold"] = s.solver.restitution_threshold;
             d["speculative_distance"] = s.speculative_distance;
             d["speculative_motion"] = s.speculative_motion;

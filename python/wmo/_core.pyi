@@ -272,9 +272,10 @@ class World:
     """A rigid-body world (metres, kilograms, seconds, radians)."""
 
     def __init__(self, gravity: npt.ArrayLike | None = None, dt: float = 1.0 / 60,
-                 substeps: int = 4, iterations: int = 1, relax_iterations: int = 1,
-                 contact_hertz: float = 30.0, contact_damping_ratio: float = 10.0,
-                 contact_push_max: float = 3.0, restitution_threshold: float = 1.0,
+                 substeps: int = 4, iterations: int = 1, relax_iterations: int = 2,
+                 contact_hertz: float = 36.0, contact_damping_ratio: float = 10.0,
+                 contact_push_max: float = 3.0, contact_static_hertz_scale: float = 2.0,
+                 restitution_threshold: float = 1.0,
                  speculative_distance: float = 0.04, speculative_motion: float = 0.0,
                  manifold_reuse_distance: float = 1e-3, manifold_reuse_angle: float = 0.0349,
                  friction_combine: str = "multiply",

@@ -8,8 +8,8 @@ second and contact points over simulated time (the thesis's FPS figures), and a 
 with median step times and the ratios to WMO.
 
 Settings that cannot be made identical are stated in the summary: WMO's soft-step
-solver runs ``substeps`` substeps of one velocity iteration each plus a relax pass
-(Box2D v3's scheme), where Bullet's sequential impulse solver runs ``iterations``
+solver runs ``substeps`` substeps of one velocity iteration each plus the World's relax
+passes (2 by default; Box2D v3's scheme has 1), where Bullet's sequential impulse solver runs ``iterations``
 passes once per step; MuJoCo solves its soft-constraint problem with PGS capped at
 ``iterations`` iterations. Bullet's friction rule is the product of the two bodies'
 coefficients, MuJoCo's the maximum, so MuJoCo's geoms get the pair friction itself.
@@ -64,8 +64,8 @@ class EngineRun:
 
 #: Threads WMO steps with (its narrowphase is parallel; peers run single-threaded).
 WMO_THREADS = 1
-#: WMO's contact spring (Hz); None keeps the World's default (30). The 20-layer pyramid
-#: stands to the centimetre at 38 Hz with 6 substeps (tests/python/test_stability.py).
+#: WMO's contact spring (Hz); None keeps the World's default (36), at which the 20-layer
+#: pyramid stands to the centimetre (tests/python/test_stability.py).
 WMO_CONTACT_HERTZ: float | None = None
 
 
@@ -75,8 +75,9 @@ def run_wmo(spec: _scenes.BoxScene, steps: int, dt: float, iterations: int, subs
     world = _scenes.build(spec, dt=dt, substeps=substeps, iterations=1, sleeping=sleeping,
                           threads=WMO_THREADS, **extra)
     hertz = "default contact Hz" if WMO_CONTACT_HERTZ is None else f"{WMO_CONTACT_HERTZ:g} Hz contacts"
+    relax = world.settings["relax_iterations"]
     run = EngineRun("wmo", f"wmo {_version()}",
-                    f"dt {dt:g}, {substeps} substeps x 1 iteration + 1 relax, {hertz}, "
+                    f"dt {dt:g}, {substeps} substeps x 1 iteration + {relax} relax, {hertz}, "
                     f"sleeping {'on' if sleeping else 'off'}, {WMO_THREADS} thread(s)")
     for k in range(steps):
         t0 = time.perf_counter()

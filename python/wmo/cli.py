@@ -68,8 +68,8 @@ def main(argv: list[str] | None = None) -> int:
     b.add_argument("--threads", type=int, default=1,
                    help="threads for WMO (default 1; the peers run single-threaded)")
     b.add_argument("--contact-hertz", type=float, default=None,
-                   help="WMO's contact spring in Hz (default: the World's, 30); the pyramid stands "
-                        "to the centimetre with --substeps 6 --contact-hertz 38")
+                   help="WMO's contact spring in Hz (default: the World's, 36, at which the pyramid "
+                        "stands to the centimetre)")
     b.add_argument("--memory", action="store_true",
                    help="also measure each engine's peak memory, in a fresh process each (Linux)")
     sv = sub.add_parser("serve", help="run a server that simulates scenes for remote clients")

@@ -148,8 +148,9 @@ def test_thin_box_lands_on_the_thin_plate_with_ccd():
     energies = run(w, 6 * 60, lambda w: lowest.append(box.position[1]))
     assert min(lowest) > 0.0005  # its centre never reached the plate's top face
     # Resting on it: touching at y = 1 mm, less the soft contact's sag under its weight
-    # (the spring of contact_hertz = 30 sags ~g / (2 pi 30)^2 per point: 0.47 mm measured
-    # here, 0.12 mm at 60 Hz), never through it.
+    # (a contact with a static body is a spring of 60 Hz at the defaults, which sags
+    # ~g / (2 pi 60)^2 per point: 0.12 mm measured here; 0.47 mm at 30 Hz), never
+    # through it.
     assert 0.0005 < box.position[1] <= 0.001 + 1e-6
     assert abs(box.linear_velocity[1]) < 1e-3
     assert_no_energy_gain(e0, energies)
@@ -419,7 +420,7 @@ def test_fast_ccd_ball_wakes_and_pushes_a_sleeping_box():
 
 @pytest.mark.xfail(strict=True, reason=(
     "issue 4's bar, not met: boxes3000 with CCD on every box reaches 0.64-0.73 m (no CCD: "
-    "0.66-0.70 m; bar 0.10 m). Its deep overlaps are not tunnelling but the soft contacts (30 Hz "
+    "0.66-0.70 m; bar 0.10 m). Its deep overlaps are not tunnelling but the soft contacts (36 Hz "
     "springs) giving way under the falling columns' loads on manifolds that go stale within a "
     "step: 0.86 m even with the narrowphase at 240 Hz, 0.13 m with 240 Hz springs at 960 Hz "
     "substeps (benchmarks/ccd/penetration.py). See the issue's notes."))

@@ -48,7 +48,7 @@ def test_moving_pairs_are_recomputed(velocity, reused):
 
 
 def test_reuse_does_not_make_a_tower_drift():
-    # A 10-box tower settles 2.8 cm under its own weight (soft contacts) and sways
+    # A 10-box tower settles 1.8 cm under its own weight (soft contacts) and sways
     # sideways at the millimetre level over 300 steps either way; reuse must settle it
     # the same and not make it drift farther sideways.
     drift, settle = [], []

@@ -31,7 +31,8 @@ def test_issue_example_box_lands_on_the_ground(sleeping):
     p = world.positions[b.index]
     assert p.shape == (3,)
     # Rests with its bottom face on y = 0: centre at 1 m, less the soft contact's sag
-    # (load / stiffness: well under 1 mm at 30 Hz) and above the speculative margin.
+    # (load / stiffness: well under 1 mm at 60 Hz, the default for a contact with a
+    # static body) and above the speculative margin.
     assert abs(p[1] - 1.0) < 1e-3
     assert np.linalg.norm(world.linear_velocities[b.index]) < 1e-3
     if sleeping:

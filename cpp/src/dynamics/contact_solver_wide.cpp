@@ -186,14 +186,26 @@ WMO_CLONES void warm_start_groups(const Group* groups, int count, Row* rows) {
   }
 }
 
-WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, float bias_rate_s, float mass_scale_s,
-                             float impulse_scale_s, float inv_h, float push_max, bool use_bias) {
+/// One softness (Softness), as the passes read it.
+struct SoftLanes {
+  float bias_rate, mass_scale, impulse_scale;
+};
+
+WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, SoftLanes dyn, SoftLanes fix, float inv_h,
+                             float push_max, bool use_bias, bool reverse) {
   const v8 zero = splat(0), one = splat(1), vinv_h = splat(inv_h);
-  const v8 bias_rate = splat(bias_rate_s), neg_push = splat(-push_max);
-  const v8 soft_mass = splat(use_bias ? mass_scale_s : 1);
-  const v8 soft_impulse = splat(use_bias ? impulse_scale_s : 0);
-  for (int k = 0; k < count; ++k) {
+  const v8 neg_push = splat(-push_max);
+  const v8 bias_rate_dyn = splat(dyn.bias_rate), bias_rate_fix = splat(fix.bias_rate);
+  const v8 soft_mass_dyn = splat(use_bias ? dyn.mass_scale : 1), soft_mass_fix = splat(use_bias ? fix.mass_scale : 1);
+  const v8 soft_impulse_dyn = splat(use_bias ? dyn.impulse_scale : 0);
+  const v8 soft_impulse_fix = splat(use_bias ? fix.impulse_scale : 0);
+  for (int kk = 0; kk < count; ++kk) {
+    const int k = reverse ? count - 1 - kk : kk;
     Group& g = groups[k];
+    const m8 fixed = ld(g.fixed) != zero;
+    const v8 bias_rate = fixed ? bias_rate_fix : bias_rate_dyn;
+    const v8 soft_mass = fixed ? soft_mass_fix : soft_mass_dyn;
+    const v8 soft_impulse = fixed ? soft_impulse_fix : soft_impulse_dyn;
     Bodies a{}, b{};
     gather_velocities(g.row_a, rows, a);
     gather_velocities(g.row_b, rows, b);
@@ -357,6 +369,7 @@ void WideContacts::build(const std::vector<ContactConstraint>& cs, const std::ve
         g.t2[r][lanes] = static_cast<float>(c.tangent2[r]);
       }
       g.mu[lanes] = static_cast<float>(c.friction);
+      g.fixed[lanes] = sa.inv_mass == 0 || sb.inv_mass == 0 ? 1.0f : 0.0f;
       g.friction = g.friction || c.friction != 0;
       g.points = std::max(g.points, c.count);
       for (int j = 0; j < c.count; ++j) {
@@ -428,12 +441,15 @@ void WideContacts::warm_start(std::vector<BodyState>& states) {
   store(states);
 }
 
-void WideContacts::solve(std::vector<BodyState>& states, const Softness& soft, Real inv_h, Real push_max,
-                         bool use_bias) {
+void WideContacts::solve(std::vector<BodyState>& states, const ContactSoftness& soft, Real inv_h,
+                         Real push_max, bool use_bias, bool reverse) {
   load(states);
-  solve_groups(groups_.data(), group_count(), rows_.data(), static_cast<float>(soft.bias_rate),
-               static_cast<float>(soft.mass_scale), static_cast<float>(soft.impulse_scale),
-               static_cast<float>(inv_h), static_cast<float>(push_max), use_bias);
+  auto lanes = [](const Softness& x) {
+    return SoftLanes{static_cast<float>(x.bias_rate), static_cast<float>(x.mass_scale),
+                     static_cast<float>(x.impulse_scale)};
+  };
+  solve_groups(groups_.data(), group_count(), rows_.data(), lanes(soft.dynamic), lanes(soft.fixed),
+               static_cast<float>(inv_h), static_cast<float>(push_max), use_bias, reverse);
   store(states);
 }
 

@@ -108,6 +108,7 @@ void validate_world_settings(const WorldSettings& s) {
   require_non_negative("contact_hertz", s.solver.contact_hertz);
   require_non_negative("contact_damping_ratio", s.solver.damping_ratio);
   require_non_negative("contact_push_max", s.solver.push_max);
+  require_non_negative("contact_static_hertz_scale", s.solver.static_hertz_scale);
   require_non_negative("restitution_threshold", s.solver.restitution_threshold);
   require_non_negative("speculative_distance", s.speculative_distance);
   require_non_negative("speculative_motion", s.speculative_motion);
@@ -1070,7 +1071,7 @@ void World::run_step() {
       if (block_size == kFreeBlock) flush_block();
     }
     flush_block();
-    Softness soft;
+    ContactSoftness soft;
     const bool contacts = !constraints_.empty();
     if (contacts) {
       prepare_contacts(constraints_, states_, settings_.solver, h, soft);
@@ -1088,8 +1089,8 @@ void World::run_step() {
       }
       integrate_positions(h);
       if (contacts)
-        for (int it = 0; it < settings_.relax_iterations; ++it)
-          wide_.solve(states_, soft, inv_h, settings_.solver.push_max, false);
+        for (int it = 0; it < settings_.relax_iterations; ++it)  // alternating: WorldSettings::relax_iterations
+          wide_.solve(states_, soft, inv_h, settings_.solver.push_max, false, it % 2 == 1);
     }
     if (contacts) wide_.unpack(constraints_);
   }

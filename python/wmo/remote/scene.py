@@ -31,6 +31,7 @@ __all__ = ["EditError", "SceneModel", "OPS", "SETTINGS", "SCENE_BUILDERS", "regi
 SETTINGS: dict[str, type] = {
     "gravity": list, "dt": float, "substeps": int, "iterations": int, "relax_iterations": int,
     "contact_hertz": float, "contact_damping_ratio": float, "contact_push_max": float,
+    "contact_static_hertz_scale": float,
     "restitution_threshold": float, "speculative_distance": float, "sleeping": bool,
     "gyroscopic": bool, "ccd": bool, "threads": int,
 }

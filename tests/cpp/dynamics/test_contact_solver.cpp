@@ -65,7 +65,7 @@ Scene random_scene(int bodies, int statics, int count, std::uint64_t seed) {
 
 void run_passes(Scene& s, bool wide, int substeps, bool level_order = false) {
   SolverSettings settings;
-  Softness soft;
+  ContactSoftness soft;
   const Real h = 1.0 / 240;
   prepare_contacts(s.constraints, s.states, settings, h, soft);
   WideContacts w;

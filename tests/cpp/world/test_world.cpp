@@ -102,7 +102,8 @@ TEST(World, BadInputRaisesAndLeavesTheWorldUnchanged) {
 
 // A box dropped on the ground comes to rest on it: resting penetration below 1 mm
 // (the soft contact holds a 1 m box under gravity with a sub-millimetre spring
-// deflection at 30 Hz: g / (2 pi 30)^2 = 0.3 mm) and velocity below 1 mm/s.
+// deflection: g / (2 pi 60)^2 = 0.07 mm at the default 60 Hz of a contact with a static
+// body) and velocity below 1 mm/s.
 TEST(World, BoxComesToRestOnTheGround) {
   for (const bool sleep : {false, true}) {
     WorldSettings s;
@@ -217,10 +218,10 @@ TEST(World, SleepingOffKeepsEverythingAwake) {
 
 // A stack of 10 unit boxes stands for 10 s: every box within 1 cm of its start.
 // 8 substeps at 60 Hz. The soft contacts sag by about load / (m (2 pi f)^2) per
-// contact, summed up the stack: 2.8 cm at the top with the default 30 Hz. With the
-// default 4 substeps at 60 Hz, one Gauss-Seidel pass per substep lets the stack rock
-// and creep sideways by up to 5 cm. Both are open problems of issue 3, measured rather
-// than hidden here.
+// contact, summed up the stack: 1.8 cm at the top with the default 36 Hz. With the
+// defaults (4 substeps at 60 Hz) the stack stands, 3.9 mm off sideways, but that sag
+// is over the 1 cm; with one relax pass per substep it rocked and crept sideways by up
+// to 5 cm. The sag is an open problem of issue 3, measured rather than hidden here.
 // 8 substeps allow 120 Hz contacts (a quarter of the substep rate); the springs' sag
 // is then 100 g / (2 pi 120)^2 = 1.7 mm for ten unit boxes (measured 1.7 mm down,
 // 1.5 mm sideways). At 60 Hz the sag alone is 6.9 mm and the sideways transient of

@@ -46,6 +46,14 @@ struct Softness {
 /// Softness for a spring of `hertz` (Hz) and `damping_ratio` over a substep of h seconds.
 Softness make_softness(Real hertz, Real damping_ratio, Real h);
 
+/// The contacts' softness for one substep: `dynamic` between two moving bodies, `fixed`
+/// for a contact with a body that does not move (inverse mass 0: static or kinematic),
+/// which is stiffer (SolverSettings::static_hertz_scale).
+struct ContactSoftness {
+  Softness dynamic;
+  Softness fixed;
+};
+
 struct ContactConstraintPoint {
   Vec3 ra = Vec3::Zero();  ///< anchor on A relative to A's COM at the step's start, m, world
   Vec3 rb = Vec3::Zero();  ///< anchor on B relative to B's COM, m, world
@@ -80,14 +88,34 @@ struct ContactConstraint {
 };
 
 struct SolverSettings {
-  /// Hz, capped at a quarter of the substep rate. 30 (Box2D v3's value): stiffer springs
-  /// sag less (steady penetration ~ load / (effective mass * (2 pi hertz)^2)) but make one
-  /// Gauss-Seidel pass per substep creep (measured: a 10-layer pyramid spreads 4 cm in
-  /// 1000 steps at 60 Hz with 4 substeps, 1 mm at 30 Hz with 8; the 20-layer pyramid
-  /// moves 1.9 cm in 600 steps at the defaults, 1.5 cm of it the springs' sag, 8.4 mm
-  /// at 38 Hz with 6 substeps and 4.9 mm at 45 Hz with 8, where it is at rest).
-  Real contact_hertz = 30;
-  Real damping_ratio = 10;       ///< of the contact spring (over-damped: no bounce)
+  /// Hz, capped at a quarter of the substep rate. Stiffer springs sag less (steady
+  /// penetration ~ load / (effective mass * (2 pi hertz)^2)) but make the Gauss-Seidel
+  /// passes creep. The defaults (36 Hz, damping ratio 10, 2 relax passes forward and
+  /// backward, static contacts 2x under the cap) were chosen on the 20-layer pyramid,
+  /// boxes3000 and a 10-box tower together (issue 3; pyramid: largest displacement
+  /// after 600 steps, "creep" its sideways part; boxes3000: deepest penetration over
+  /// 600 steps, no CCD; tower: sideways drift of its top once settled):
+  ///   Box2D v3's 30 Hz, ratio 10, 1 relax (the old defaults): pyramid 1.9 cm (1.1 cm
+  ///     creep), boxes3000 0.66 m, tower 3.8 mm;
+  ///   the same with static contacts 2x: pyramid 1.7 cm;
+  ///   36 Hz, 2 relax passes both forward: pyramid 1.2 cm (1.0 cm creep); with ratio
+  ///     1 or 2 instead of 10, 7.2 / 8.6 mm, but boxes3000 1.00 / 0.74 m (a lightly
+  ///     damped contact stops a fast box later) and the tower rocks while it settles
+  ///     and stays 1.1 cm off;
+  ///   36 Hz, 2 relax passes forward then backward, ratio 10 (the defaults): pyramid
+  ///     8.3 mm (2.1 mm creep; the same after 6000 steps, at rest), boxes3000 0.50 m,
+  ///     tower 3.9 mm.
+  /// 40 Hz and above creep again at 4 substeps.
+  Real contact_hertz = 36;
+  /// Contacts with a body that does not move (static or kinematic) get this many times
+  /// contact_hertz, under the same cap (Box2D v3's static softness, 2): the ground
+  /// carries a whole pile, and a spring of half the stiffness there sagged most of
+  /// the pile's sag, where nothing on the other side can give way and the row's
+  /// effective mass is that of one body.
+  Real static_hertz_scale = 2;
+  /// Of the contact spring (dimensionless; 1 is critical damping). 10, as Box2D v3:
+  /// strongly over-damped, no bounce, and a fast box is stopped early (contact_hertz).
+  Real damping_ratio = 10;
   Real push_max = 3;             ///< m/s, largest bias velocity that resolves overlap
   Real restitution_threshold = 1;  ///< m/s, slower approaches do not bounce
 };
@@ -95,12 +123,12 @@ struct SolverSettings {
 /// Computes effective masses and softness for `h` (the substep). States must hold
 /// inv_mass / inv_inertia; constraints their normal and tangents.
 void prepare_contacts(std::vector<ContactConstraint>& cs, const std::vector<BodyState>& states,
-                      const SolverSettings& s, Real h, Softness& soft);
+                      const SolverSettings& s, Real h, ContactSoftness& soft);
 /// Applies the accumulated (warm-start) impulses.
 void warm_start_contacts(std::vector<ContactConstraint>& cs, std::vector<BodyState>& states);
 /// One Gauss-Seidel pass over every contact; `use_bias` adds the soft position bias.
 void solve_contacts(std::vector<ContactConstraint>& cs, std::vector<BodyState>& states,
-                    const Softness& soft, Real inv_h, Real push_max, bool use_bias);
+                    const ContactSoftness& soft, Real inv_h, Real push_max, bool use_bias);
 /// Restitution pass after the substeps (Box2D v3 b2ApplyRestitution): each point that
 /// approached faster than `threshold` and pushed gets the normal velocity
 /// -restitution * v_impact, where v_impact is the approach speed at the substep it first
@@ -155,7 +183,9 @@ class WideContacts {
   /// velocities and motion (v, w, dp, dq) from `states` and adds the velocity changes
   /// back.
   void warm_start(std::vector<BodyState>& states);
-  void solve(std::vector<BodyState>& states, const Softness& soft, Real inv_h, Real push_max, bool use_bias);
+  /// `reverse` visits the groups last to first (a backward Gauss-Seidel pass).
+  void solve(std::vector<BodyState>& states, const ContactSoftness& soft, Real inv_h, Real push_max,
+             bool use_bias, bool reverse = false);
   /// Writes impulses, max_normal_impulse, relative_velocity and push_gap back to `cs`
   /// (the constraints given to build).
   void unpack(std::vector<ContactConstraint>& cs) const;
@@ -173,6 +203,8 @@ class WideContacts {
     alignas(32) float ia[6][kLanes] = {}, ib[6][kLanes] = {};
     alignas(32) float n[3][kLanes] = {}, t1[3][kLanes] = {}, t2[3][kLanes] = {};
     alignas(32) float mu[kLanes] = {};
+    /// 1 where the lane's constraint has a body that does not move (ContactSoftness::fixed).
+    alignas(32) float fixed[kLanes] = {};
     struct Point {
       alignas(32) float ra[3][kLanes] = {}, rb[3][kLanes] = {};
       /// Separation at the step's start (m): adjusted_separation + n.(rb - ra).
