@@ -377,7 +377,7 @@ def test_ball_bounces_to_e_squared_height_at_the_default_step():
 
 @pytest.mark.xfail(strict=True, reason="issue 3/4, open: at 4.5 m/s the ball moves 7.5 cm in the impact "
                    "step, more than the 4 cm speculative margin, so it sinks 2.2 cm before the contact "
-                   "exists (measured 5.2% low with e = 0.5 at dt 1/60). With speculative_motion=1 it "
+                   "exists (measured 5.6% low with e = 0.5 at dt 1/60). With speculative_motion=1 it "
                    "stops at the surface and is 2.8% low, which is semi-implicit Euler's own energy "
                    "drift at this step (0.9% of the energy lost on the way down, v h / 2 of height on "
                    "the way up); at dt 1/120 it is 1.4% low either way")
