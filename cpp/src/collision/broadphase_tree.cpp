@@ -491,7 +491,8 @@ class AabbTreeBroadphase final : public Broadphase {
   }
 
   /// Sorts pairs of non-negative ids lexicographically: an LSD radix sort on the key
-  /// first * 2^b + second (b: bits of the largest id), 11 bits a pass (ids below
+  /// first * 2^b + second (b: bits of the largest id, which is a `second`: every pair
+  /// has first < second), 11 bits a pass (ids below
   /// 16,384: three passes over 2048 buckets). The same order as std::sort, several
   /// times faster on the tens of thousands of candidates a mass move produces.
   void sort_pairs(std::vector<ProxyPair>& v) {

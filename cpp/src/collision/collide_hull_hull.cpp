@@ -365,11 +365,10 @@ bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_i
   if (edge_a >= 0 && clip::sat_better(sep_e, best, size)) kind = AxisKind::kEdge;
 
   if (kind == AxisKind::kEdge) {
-    const auto& ha = a.half_edges();
-    const ConvexHull::HalfEdge& ea = ha[a.edges()[edge_a]];
-    const ConvexHull::EdgeArc& eb = b.edge_arcs()[edge_b];
+    const ConvexHull::EdgeArc& ea = arcs_a[edge_a];
+    const ConvexHull::EdgeArc& eb = arcs_b[edge_b];
     Vec3 pa, pb;
-    clip::closest_points_segments(a.vertices()[ea.origin], a.vertices()[ha[ea.next].origin],
+    clip::closest_points_segments(a.vertices()[ea.tail], a.vertices()[ea.head],
                                   b_in_a.transform_point(b.vertices()[eb.tail]),
                                   b_in_a.transform_point(b.vertices()[eb.head]), pa, pb);
     const Real depth = n_e.dot(pa - pb);

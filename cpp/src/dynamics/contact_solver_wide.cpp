@@ -369,7 +369,7 @@ void WideContacts::build(const std::vector<ContactConstraint>& cs, const std::ve
         g.t2[r][lanes] = static_cast<float>(c.tangent2[r]);
       }
       g.mu[lanes] = static_cast<float>(c.friction);
-      g.fixed[lanes] = sa.inv_mass == 0 || sb.inv_mass == 0 ? 1.0f : 0.0f;
+      g.fixed[lanes] = !moves(sa) || !moves(sb) ? 1.0f : 0.0f;
       g.friction = g.friction || c.friction != 0;
       g.points = std::max(g.points, c.count);
       for (int j = 0; j < c.count; ++j) {

@@ -3,10 +3,11 @@
 // Soft step (Catto, "Solver2D" 2024 and Box2D v3's solver.c / contact_solver.c): the
 // step is split into substeps; each substep integrates velocities, warm starts, solves
 // the contacts with a soft position bias (a spring-damper of `contact_hertz`, twice
-// that against a body that does not move, damping ratio `damping_ratio`, capped at
-// `push_max` m/s), integrates positions, then relaxes (solves again without the bias,
-// so the bias's velocity is not kept as energy; WMO runs two relax passes by default,
-// the second backward over the constraints, where Box2D runs one).
+// that, under the same cap, against a body that does not move; damping ratio
+// `damping_ratio`; its bias capped at `push_max` m/s), integrates positions, then
+// relaxes (solves again without the bias, so the bias's velocity is not kept as
+// energy; WMO runs two relax passes by default, the second backward over the
+// constraints, where Box2D runs one).
 // Restitution is applied once after the substeps. Anchors stay fixed within the step
 // and the current separation is updated from the bodies' position and rotation deltas,
 // so contacts need not be recomputed per substep.
