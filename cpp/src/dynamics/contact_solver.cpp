@@ -41,6 +41,12 @@ inline Vec3 relative_velocity(const BodyState& a, const BodyState& b, const Vec3
 
 }  // namespace
 
+void current_anchors(const BodyState& a, const BodyState& b, const ContactConstraintPoint& p, Vec3& ra,
+                     Vec3& rb) {
+  ra = p.ra + (a.dq * p.ca - p.ca);
+  rb = p.rb + (b.dq * p.cb - p.cb);
+}
+
 void prepare_contacts(std::vector<ContactConstraint>& cs, const std::vector<BodyState>& states,
                       const SolverSettings& s, Real h, ContactSoftness& soft) {
   // Stiffer than a quarter of the substep rate and the spring is under-resolved by the
@@ -74,7 +80,9 @@ void warm_start_contacts(std::vector<ContactConstraint>& cs, std::vector<BodySta
       const ContactConstraintPoint& p = c.points[i];
       const Vec3 imp = p.normal_impulse * c.normal + p.tangent_impulse[0] * c.tangent1 +
                        p.tangent_impulse[1] * c.tangent2;
-      apply(a, b, p.ra, p.rb, imp);
+      Vec3 ra, rb;
+      current_anchors(a, b, p, ra, rb);
+      apply(a, b, ra, rb, imp);
     }
   }
 }
@@ -88,10 +96,13 @@ void solve_contacts(std::vector<ContactConstraint>& cs, std::vector<BodyState>& 
     const Softness& soft = a.inv_mass == 0 || b.inv_mass == 0 ? softness.fixed : softness.dynamic;
     for (int i = 0; i < c.count; ++i) {
       ContactConstraintPoint& p = c.points[i];
-      // Current separation from the bodies' motion since the step began (anchors
-      // rotated by the rotation deltas), as in Box2D v3.
-      const Vec3 d = (b.dp + b.dq * p.rb) - (a.dp + a.dq * p.ra);
+      // Current separation from the bodies' motion since the step began, at the current
+      // anchors (turned with the bodies, see current_anchors).
+      Vec3 ra, rb;
+      current_anchors(a, b, p, ra, rb);
+      const Vec3 d = (b.dp + rb) - (a.dp + ra);
       const Real s = n.dot(d) + p.adjusted_separation;
+      const Real normal_mass = row_mass(p.normal_mass, effective_mass(a, b, ra, rb, n));
       Real bias = 0, mass_scale = 1, impulse_scale = 0;
       if (s > 0) {
         bias = s * inv_h;  // speculative: allow the gap to close within this substep
@@ -100,8 +111,8 @@ void solve_contacts(std::vector<ContactConstraint>& cs, std::vector<BodyState>& 
         mass_scale = soft.mass_scale;
         impulse_scale = soft.impulse_scale;
       }
-      const Real vn = n.dot(relative_velocity(a, b, p.ra, p.rb));
-      Real impulse = -p.normal_mass * mass_scale * (vn + bias) - impulse_scale * p.normal_impulse;
+      const Real vn = n.dot(relative_velocity(a, b, ra, rb));
+      Real impulse = -normal_mass * mass_scale * (vn + bias) - impulse_scale * p.normal_impulse;
       const Real next = std::max(p.normal_impulse + impulse, Real(0));
       impulse = next - p.normal_impulse;
       p.normal_impulse = next;
@@ -113,12 +124,14 @@ void solve_contacts(std::vector<ContactConstraint>& cs, std::vector<BodyState>& 
         p.push_gap = std::max(s, Real(0));
       }
       p.max_normal_impulse = std::max(p.max_normal_impulse, impulse);
-      apply(a, b, p.ra, p.rb, impulse * n);
+      apply(a, b, ra, rb, impulse * n);
     }
     if (c.friction == 0) continue;
     for (int i = 0; i < c.count; ++i) {
       ContactConstraintPoint& p = c.points[i];
-      const Vec3 dv = relative_velocity(a, b, p.ra, p.rb);
+      Vec3 ra, rb;
+      current_anchors(a, b, p, ra, rb);
+      const Vec3 dv = relative_velocity(a, b, ra, rb);
       Real t0 = p.tangent_impulse[0] - p.tangent_mass[0] * c.tangent1.dot(dv);
       Real t1 = p.tangent_impulse[1] - p.tangent_mass[1] * c.tangent2.dot(dv);
       // Coulomb cone: scale the tangential impulse back onto the circle of radius mu * lambda_n.
@@ -131,7 +144,7 @@ void solve_contacts(std::vector<ContactConstraint>& cs, std::vector<BodyState>& 
       }
       const Real d0 = t0 - p.tangent_impulse[0], d1 = t1 - p.tangent_impulse[1];
       p.tangent_impulse = {t0, t1};
-      apply(a, b, p.ra, p.rb, d0 * c.tangent1 + d1 * c.tangent2);
+      apply(a, b, ra, rb, d0 * c.tangent1 + d1 * c.tangent2);
     }
   }
 }
@@ -150,13 +163,16 @@ void apply_restitution(std::vector<ContactConstraint>& cs, std::vector<BodyState
       const Real gn = c.normal.dot(b.gravity - a.gravity);
       Real approach = p.relative_velocity;
       if (gn < 0 && p.push_gap > 0) approach = -std::sqrt(approach * approach - 2 * gn * p.push_gap);
-      const Real vn = c.normal.dot(relative_velocity(a, b, p.ra, p.rb));
-      Real impulse = -p.normal_mass * (vn + c.restitution * approach);
+      Vec3 ra, rb;
+      current_anchors(a, b, p, ra, rb);
+      const Vec3& n = c.normal;
+      const Real vn = n.dot(relative_velocity(a, b, ra, rb));
+      Real impulse = -row_mass(p.normal_mass, effective_mass(a, b, ra, rb, n)) * (vn + c.restitution * approach);
       const Real next = std::max(p.normal_impulse + impulse, Real(0));
       impulse = next - p.normal_impulse;
       p.normal_impulse = next;
       p.max_normal_impulse = std::max(p.max_normal_impulse, impulse);
-      apply(a, b, p.ra, p.rb, impulse * c.normal);
+      apply(a, b, ra, rb, impulse * n);
     }
   }
 }

@@ -167,19 +167,30 @@ WMO_INLINE V3 relative_velocity(const Bodies& a, const Bodies& b, const V3& ra, 
   return (b.v + cross(b.w, rb)) - (a.v + cross(a.w, ra));
 }
 
+/// current_anchors() of contact_solver.cpp: point p's anchors turned with the bodies
+/// about their centres of curvature.
+WMO_INLINE void turned_anchors(const Bodies& a, const Bodies& b, const Group::Point& p, V3& ra, V3& rb) {
+  ra = ld3(p.ra) + rotation_offset(a, ld3(p.ca));
+  rb = ld3(p.rb) + rotation_offset(b, ld3(p.cb));
+}
+
 WMO_CLONES void warm_start_groups(const Group* groups, int count, Row* rows) {
   for (int k = 0; k < count; ++k) {
     const Group& g = groups[k];
     Bodies a{}, b{};
     gather_velocities(g.row_a, rows, a);
     gather_velocities(g.row_b, rows, b);
+    gather_motion(g.row_a, rows, a);
+    gather_motion(g.row_b, rows, b);
     const v8 ima = ld(g.inv_mass_a), imb = ld(g.inv_mass_b);
     const Inertia ia = ld_inertia(g.ia), ib = ld_inertia(g.ib);
     const V3 n = ld3(g.n), t1 = ld3(g.t1), t2 = ld3(g.t2);
     for (int j = 0; j < g.points; ++j) {
       const Group::Point& p = g.p[j];
       const V3 imp = ld(p.normal_impulse) * n + ld(p.tangent_impulse[0]) * t1 + ld(p.tangent_impulse[1]) * t2;
-      apply(a, b, ima, imb, ia, ib, ld3(p.ra), ld3(p.rb), imp);
+      V3 ra, rb;
+      turned_anchors(a, b, p, ra, rb);
+      apply(a, b, ima, imb, ia, ib, ra, rb, imp);
     }
     scatter(g.row_a, a, rows);
     scatter(g.row_b, b, rows);
@@ -215,12 +226,25 @@ WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, SoftLanes dyn,
     const Inertia ia = ld_inertia(g.ia), ib = ld_inertia(g.ib);
     const V3 n = ld3(g.n);
     const V3 dp = b.dp - a.dp;
+    V3 anchor_a[4], anchor_b[4];  // the points' current anchors, for the friction rows
     for (int j = 0; j < g.points; ++j) {
       Group::Point& p = g.p[j];
-      const V3 ra = ld3(p.ra), rb = ld3(p.rb);
+      V3& ra = anchor_a[j];
+      V3& rb = anchor_b[j];
+      turned_anchors(a, b, p, ra, rb);
       // Separation now: at the step's start plus the change the motion made.
-      const V3 d = dp + (rotation_offset(b, rb) - rotation_offset(a, ra));
+      const V3 d = dp + ((rb - ld3(p.rb)) - (ra - ld3(p.ra)));
       const v8 s = dot(n, d) + ld(p.base_separation);
+      // row_mass(): the step's effective mass unless the one at the turned anchors
+      // differs from it by more than 10%. A padding point (a lane with fewer points,
+      // or a padding lane) has a stale mass of 0 and must keep it: it pushes nothing.
+      const V3 cra = cross(ra, n), crb = cross(rb, n);
+      const v8 k_n = ima + imb + dot(cra, mul(ia, cra)) + dot(crb, mul(ib, crb));
+      const v8 current = k_n > zero ? one / k_n : zero;
+      const v8 stale = ld(p.normal_mass);
+      const v8 diff = stale - current;
+      const m8 keep = (vmax(diff, -diff) <= splat(0.1f) * current) | (stale == zero);
+      const v8 normal_mass = keep ? stale : current;
       // s > 0: speculative (bias s / h, full mass, no decay); otherwise the soft bias
       // when use_bias, else none.
       const m8 spec = s > zero;
@@ -230,7 +254,7 @@ WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, SoftLanes dyn,
       const v8 impulse_scale = spec ? zero : soft_impulse;
       const v8 vn = dot(n, relative_velocity(a, b, ra, rb));
       const v8 ni = ld(p.normal_impulse);
-      v8 impulse = -ld(p.normal_mass) * mass_scale * (vn + bias) - impulse_scale * ni;
+      v8 impulse = -normal_mass * mass_scale * (vn + bias) - impulse_scale * ni;
       const v8 next = vmax(ni + impulse, zero);
       impulse = next - ni;
       st(p.normal_impulse, next);
@@ -247,7 +271,8 @@ WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, SoftLanes dyn,
       const m8 has_mu = mu != zero;
       for (int j = 0; j < g.points; ++j) {
         Group::Point& p = g.p[j];
-        const V3 ra = ld3(p.ra), rb = ld3(p.rb);
+        const V3& ra = anchor_a[j];
+        const V3& rb = anchor_b[j];
         const V3 dv = relative_velocity(a, b, ra, rb);
         const v8 ti0 = ld(p.tangent_impulse[0]), ti1 = ld(p.tangent_impulse[1]);
         v8 x0 = ti0 - ld(p.tangent_mass[0]) * dot(t1, dv);
@@ -378,6 +403,10 @@ void WideContacts::build(const std::vector<ContactConstraint>& cs, const std::ve
         for (int r = 0; r < 3; ++r) {
           p.ra[r][lanes] = static_cast<float>(cp.ra[r]);
           p.rb[r][lanes] = static_cast<float>(cp.rb[r]);
+        }
+        for (int r = 0; r < 3; ++r) {
+          p.ca[r][lanes] = static_cast<float>(cp.ca[r]);
+          p.cb[r][lanes] = static_cast<float>(cp.cb[r]);
         }
         // In double: adjusted_separation carries -n.(rb - ra), which may be large (an
         // anchor far out on a big ground box) where the separation itself is small.

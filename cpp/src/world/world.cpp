@@ -703,6 +703,39 @@ bool single_manifold_shape(const Shape& s) {
 }
 }  // namespace
 
+namespace {
+/// Radius of curvature (m) of body shape `s` at a contact whose outward surface normal
+/// (from the body into the other one) is `outward` (world), for the solver's anchors
+/// (ContactConstraintPoint::ca): the convex radius of the touching shape (a sphere's
+/// or capsule's radius, a rounded box's rounding, 0 for sharp shapes, meshes and
+/// planes), and a cylinder's radius where it touches with its side (the normal within
+/// 1e-3 of perpendicular to its axis: lying on it, it rolls); on a cap or the rim the
+/// touching point is a vertex of its outline (0). `child` picks a compound's child.
+Real contact_curvature(const Shape& s, int child, const Quat& orientation, const Vec3& outward) {
+  const Shape* leaf = &s;
+  Quat q = orientation;
+  if (s.type() == ShapeType::kCompound) {
+    const auto& children = static_cast<const Compound&>(s).children();
+    if (child < 0 || child >= static_cast<int>(children.size())) return 0;
+    leaf = children[static_cast<std::size_t>(child)].shape.get();
+    q = orientation * children[static_cast<std::size_t>(child)].pose.rotation;
+  }
+  switch (leaf->type()) {
+    case ShapeType::kCylinder: {
+      const Real axial = (q.conjugate() * outward).y();
+      return std::abs(axial) <= 1e-3 ? static_cast<const Cylinder*>(leaf)->cylinder_radius() : Real(0);
+    }
+    case ShapeType::kSphere:
+    case ShapeType::kBox:
+    case ShapeType::kCapsule:
+    case ShapeType::kConvexHull:
+      return static_cast<const ConvexShape*>(leaf)->radius();
+    default:
+      return 0;
+  }
+}
+}  // namespace
+
 void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseOut& out) const {
   CollideSettings cs;
   cs.margin = margin;
@@ -781,6 +814,8 @@ void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseO
     c.friction = mu;
     c.restitution = e;
     c.count = m.count;
+    const Real rho_a = contact_curvature(*shapes_[a], m.child_a, orientations_[a], m.normal);
+    const Real rho_b = contact_curvature(*shapes_[b], m.child_b, orientations_[b], -m.normal);
     for (int k = 0; k < m.count; ++k) {
       const ContactPoint& cp = m.points[k];
       ContactConstraintPoint& p = c.points[k];
@@ -788,6 +823,8 @@ void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseO
       p.ra = mid - com_a;
       p.rb = mid - com_b;
       p.adjusted_separation = -cp.depth - m.normal.dot(p.rb - p.ra);
+      p.ca = cp.point_a - com_a - rho_a * m.normal;
+      p.cb = cp.point_b - com_b + rho_b * m.normal;
       p.feature_id = cp.feature_id;
       if (cached) {
         for (int j = 0; j < cached->count; ++j) {
@@ -1458,13 +1495,16 @@ std::vector<ContactInfo> World::contacts() const {
     const BodyState& b = states_[c.body_b];
     for (int k = 0; k < c.count; ++k) {
       const ContactConstraintPoint& p = c.points[k];
-      // Separation after the step, from the bodies' motion over it.
-      const Vec3 d = (b.dp + b.dq * p.rb) - (a.dp + a.dq * p.ra);
+      // Separation after the step, from the bodies' motion over it, at the anchors as
+      // the solver turned them.
+      Vec3 ra, rb;
+      current_anchors(a, b, p, ra, rb);
+      const Vec3 d = (b.dp + rb) - (a.dp + ra);
       const Real s = c.normal.dot(d) + p.adjusted_separation;
       ContactInfo ci;
       ci.body_a = c.body_a;
       ci.body_b = c.body_b;
-      ci.point = world_com(c.body_a) + a.dq * p.ra;
+      ci.point = world_com(c.body_a) + ra;
       ci.normal = c.normal;
       ci.depth = -s;
       ci.normal_impulse = p.normal_impulse;

@@ -34,7 +34,10 @@ Scene random_scene(int bodies, int statics, int count, std::uint64_t seed) {
     b.v = vec();
     b.w = vec();
     b.dp = 0.01 * vec();
-    b.dq = Quat(1, 0.01 * u(rng), 0.01 * u(rng), 0.01 * u(rng)).normalized();
+    // Mostly small turns; every fifth body turned far (up to ~1 rad), where the rows
+    // use the effective mass at the turned anchors (row_mass).
+    const Real turn = i % 5 == 0 ? 0.5 : 0.01;
+    b.dq = Quat(1, turn * u(rng), turn * u(rng), turn * u(rng)).normalized();
     b.inv_mass = 0.5 + 0.5 * (u(rng) + 1);
     const Mat3 r = Quat(vec().normalized().x(), u(rng), u(rng), u(rng)).normalized().toRotationMatrix();
     b.inv_inertia = r * Vec3(1 + u(rng) * 0.5, 2 + u(rng), 3 + u(rng)).asDiagonal() * r.transpose();
@@ -54,6 +57,9 @@ Scene random_scene(int bodies, int statics, int count, std::uint64_t seed) {
       ContactConstraintPoint& p = c.points[j];
       p.ra = vec();
       p.rb = vec();
+      // Centres of curvature: the anchors turn with the bodies' dq about them.
+      p.ca = 0.5 * vec();
+      p.cb = 0.5 * vec();
       p.adjusted_separation = 0.02 * u(rng);  // some speculative, some penetrating
       p.normal_impulse = k % 3 == 0 ? 0 : 0.1 * (u(rng) + 1);
       p.tangent_impulse = {0.02 * u(rng), 0.02 * u(rng)};
