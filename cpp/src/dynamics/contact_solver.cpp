@@ -35,6 +35,11 @@ inline void apply(BodyState& a, BodyState& b, const Vec3& ra, const Vec3& rb, co
   b.w += b.inv_inertia * rb.cross(p);
 }
 
+/// The larger sin^2 of half the angle the two bodies turned since the step began.
+inline Real turn_sin2(const BodyState& a, const BodyState& b) {
+  return std::max(a.dq.vec().squaredNorm(), b.dq.vec().squaredNorm());
+}
+
 inline Vec3 relative_velocity(const BodyState& a, const BodyState& b, const Vec3& ra, const Vec3& rb) {
   return (b.v + b.w.cross(rb)) - (a.v + a.w.cross(ra));
 }
@@ -102,7 +107,7 @@ void solve_contacts(std::vector<ContactConstraint>& cs, std::vector<BodyState>& 
       current_anchors(a, b, p, ra, rb);
       const Vec3 d = (b.dp + rb) - (a.dp + ra);
       const Real s = n.dot(d) + p.adjusted_separation;
-      const Real normal_mass = row_mass(p.normal_mass, effective_mass(a, b, ra, rb, n));
+      const Real normal_mass = row_mass(p.normal_mass, effective_mass(a, b, ra, rb, n), turn_sin2(a, b));
       Real bias = 0, mass_scale = 1, impulse_scale = 0;
       if (s > 0) {
         bias = s * inv_h;  // speculative: allow the gap to close within this substep
@@ -167,7 +172,8 @@ void apply_restitution(std::vector<ContactConstraint>& cs, std::vector<BodyState
       current_anchors(a, b, p, ra, rb);
       const Vec3& n = c.normal;
       const Real vn = n.dot(relative_velocity(a, b, ra, rb));
-      Real impulse = -row_mass(p.normal_mass, effective_mass(a, b, ra, rb, n)) * (vn + c.restitution * approach);
+      Real impulse =
+          -row_mass(p.normal_mass, effective_mass(a, b, ra, rb, n), turn_sin2(a, b)) * (vn + c.restitution * approach);
       const Real next = std::max(p.normal_impulse + impulse, Real(0));
       impulse = next - p.normal_impulse;
       p.normal_impulse = next;

@@ -169,9 +169,11 @@ WMO_INLINE V3 relative_velocity(const Bodies& a, const Bodies& b, const V3& ra, 
 
 /// current_anchors() of contact_solver.cpp: point p's anchors turned with the bodies
 /// about their centres of curvature.
-WMO_INLINE void turned_anchors(const Bodies& a, const Bodies& b, const Group::Point& p, V3& ra, V3& rb) {
-  ra = ld3(p.ra) + rotation_offset(a, ld3(p.ca));
-  rb = ld3(p.rb) + rotation_offset(b, ld3(p.cb));
+WMO_INLINE void turned_anchors(const Bodies& a, const Bodies& b, const Group::Point& p, const V3& n, V3& ra,
+                               V3& rb) {
+  const V3 ra0 = ld3(p.ra), rb0 = ld3(p.rb);
+  ra = ra0 + rotation_offset(a, ra0 + ld(p.ca_n) * n);
+  rb = rb0 + rotation_offset(b, rb0 + ld(p.cb_n) * n);
 }
 
 WMO_CLONES void warm_start_groups(const Group* groups, int count, Row* rows) {
@@ -189,7 +191,7 @@ WMO_CLONES void warm_start_groups(const Group* groups, int count, Row* rows) {
       const Group::Point& p = g.p[j];
       const V3 imp = ld(p.normal_impulse) * n + ld(p.tangent_impulse[0]) * t1 + ld(p.tangent_impulse[1]) * t2;
       V3 ra, rb;
-      turned_anchors(a, b, p, ra, rb);
+      turned_anchors(a, b, p, n, ra, rb);
       apply(a, b, ima, imb, ia, ib, ra, rb, imp);
     }
     scatter(g.row_a, a, rows);
@@ -226,25 +228,34 @@ WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, SoftLanes dyn,
     const Inertia ia = ld_inertia(g.ia), ib = ld_inertia(g.ib);
     const V3 n = ld3(g.n);
     const V3 dp = b.dp - a.dp;
+    // Lanes whose bodies turned by more than kRowMassTurn since the step began (the
+    // others keep the step's effective mass, row_mass()); none: the turned masses are
+    // not evaluated at all.
+    const v8 turn2 = vmax(a.qx * a.qx + a.qy * a.qy + a.qz * a.qz, b.qx * b.qx + b.qy * b.qy + b.qz * b.qz);
+    const m8 lane_turned = turn2 > splat(static_cast<float>(kRowMassTurnSin2));
+    int turned = 0;
+    for (int l = 0; l < L; ++l) turned |= lane_turned[l];
     V3 anchor_a[4], anchor_b[4];  // the points' current anchors, for the friction rows
     for (int j = 0; j < g.points; ++j) {
       Group::Point& p = g.p[j];
       V3& ra = anchor_a[j];
       V3& rb = anchor_b[j];
-      turned_anchors(a, b, p, ra, rb);
+      turned_anchors(a, b, p, n, ra, rb);
       // Separation now: at the step's start plus the change the motion made.
       const V3 d = dp + ((rb - ld3(p.rb)) - (ra - ld3(p.ra)));
       const v8 s = dot(n, d) + ld(p.base_separation);
       // row_mass(): the step's effective mass unless the one at the turned anchors
       // differs from it by more than 10%. A padding point (a lane with fewer points,
       // or a padding lane) has a stale mass of 0 and must keep it: it pushes nothing.
-      const V3 cra = cross(ra, n), crb = cross(rb, n);
-      const v8 k_n = ima + imb + dot(cra, mul(ia, cra)) + dot(crb, mul(ib, crb));
-      const v8 current = k_n > zero ? one / k_n : zero;
-      const v8 stale = ld(p.normal_mass);
-      const v8 diff = stale - current;
-      const m8 keep = (vmax(diff, -diff) <= splat(0.1f) * current) | (stale == zero);
-      const v8 normal_mass = keep ? stale : current;
+      v8 normal_mass = ld(p.normal_mass);
+      if (turned) {
+        const V3 cra = cross(ra, n), crb = cross(rb, n);
+        const v8 k_n = ima + imb + dot(cra, mul(ia, cra)) + dot(crb, mul(ib, crb));
+        const v8 current = k_n > zero ? one / k_n : zero;
+        const v8 diff = normal_mass - current;
+        const m8 keep = (vmax(diff, -diff) <= splat(0.1f) * current) | (normal_mass == zero) | ~lane_turned;
+        normal_mass = keep ? normal_mass : current;
+      }
       // s > 0: speculative (bias s / h, full mass, no decay); otherwise the soft bias
       // when use_bias, else none.
       const m8 spec = s > zero;
@@ -404,10 +415,8 @@ void WideContacts::build(const std::vector<ContactConstraint>& cs, const std::ve
           p.ra[r][lanes] = static_cast<float>(cp.ra[r]);
           p.rb[r][lanes] = static_cast<float>(cp.rb[r]);
         }
-        for (int r = 0; r < 3; ++r) {
-          p.ca[r][lanes] = static_cast<float>(cp.ca[r]);
-          p.cb[r][lanes] = static_cast<float>(cp.cb[r]);
-        }
+        p.ca_n[lanes] = static_cast<float>(c.normal.dot(cp.ca - cp.ra));
+        p.cb_n[lanes] = static_cast<float>(c.normal.dot(cp.cb - cp.rb));
         // In double: adjusted_separation carries -n.(rb - ra), which may be large (an
         // anchor far out on a big ground box) where the separation itself is small.
         p.base_separation[lanes] = static_cast<float>(cp.adjusted_separation + c.normal.dot(cp.rb - cp.ra));

@@ -57,9 +57,10 @@ Scene random_scene(int bodies, int statics, int count, std::uint64_t seed) {
       ContactConstraintPoint& p = c.points[j];
       p.ra = vec();
       p.rb = vec();
-      // Centres of curvature: the anchors turn with the bodies' dq about them.
-      p.ca = 0.5 * vec();
-      p.cb = 0.5 * vec();
+      // Centres of curvature, on the normal through the anchor (as World puts them):
+      // the anchors turn with the bodies' dq about them.
+      p.ca = p.ra - 0.5 * (u(rng) + 1) * c.normal;
+      p.cb = p.rb + 0.5 * (u(rng) + 1) * c.normal;
       p.adjusted_separation = 0.02 * u(rng);  // some speculative, some penetrating
       p.normal_impulse = k % 3 == 0 ? 0 : 0.1 * (u(rng) + 1);
       p.tangent_impulse = {0.02 * u(rng), 0.02 * u(rng)};

@@ -76,6 +76,8 @@ struct ContactConstraintPoint {
   /// sphere it is the centre (a spinning ball's contact stays at its bottom). Measured
   /// from the body's own surface point, not from the anchor: a speculative contact's
   /// anchor lies in the gap, away from both bodies. World sets them from the shapes.
+  /// WideContacts keeps only their components along n (the parts across n, if any,
+  /// are dropped there): World's lie on the normal through the anchor.
   Vec3 ca = Vec3::Zero(), cb = Vec3::Zero();
   /// Separation at the step's start minus n.(rb - ra) (m), so that the current
   /// separation is adjusted_separation + n.((dp_b + rb') - (dp_a + ra')) with the
@@ -152,15 +154,22 @@ struct SolverSettings {
 void current_anchors(const BodyState& a, const BodyState& b, const ContactConstraintPoint& p, Vec3& ra,
                      Vec3& rb);
 
+/// Turns since the step began up to this (sin^2 of half the angle: 0.05 rad) keep the
+/// step's effective masses outright (row_mass), without evaluating the turned ones.
+constexpr Real kRowMassTurnSin2 = 6.25e-4;
+
 /// The effective-mass inverse a row uses at the turned anchors: the step's (`stale`,
-/// from prepare_contacts) while it is within 10% of the one at the current anchors
-/// (`current`), else the current one. Recomputing it every pass made the 20-layer
-/// pyramid creep (1.0 cm after 3000 steps against 8.2 mm; 5.6 mm of motion after step
-/// 600 against none), while a body that turns far within a step (a box spinning 100
+/// from prepare_contacts) while neither body has turned by more than 0.05 rad since the
+/// step began (`turn_sin2`: the larger sin^2 of half their angles) or while it is
+/// within 10% of the one at the current anchors (`current`), else the current one;
+/// 0 (a padding point) stays 0. Recomputing it every pass made the 20-layer pyramid
+/// creep (1.0 cm after 3000 steps against 8.2 mm; 5.6 mm of motion after step 600
+/// against none), while a body that turns far within a step (a box spinning 100
 /// degrees a step) needs it: with the stale mass its pushes overshoot and diverge.
 /// Within 10% a Gauss-Seidel row under- or overshoots by at most 10%, which the passes
 /// absorb.
-inline Real row_mass(Real stale, Real current) {
+inline Real row_mass(Real stale, Real current, Real turn_sin2) {
+  if (turn_sin2 <= kRowMassTurnSin2 || stale == 0) return stale;
   return std::abs(stale - current) <= 0.1 * current ? stale : current;
 }
 
@@ -251,8 +260,11 @@ class WideContacts {
     alignas(32) float fixed[kLanes] = {};
     struct Point {
       alignas(32) float ra[3][kLanes] = {}, rb[3][kLanes] = {};
-      /// ContactConstraintPoint::ca / cb.
-      alignas(32) float ca[3][kLanes] = {}, cb[3][kLanes] = {};
+      /// ContactConstraintPoint::ca / cb as offsets along n from the anchors:
+      /// ca = ra + ca_n n, cb = rb + cb_n n (m). World's centres of curvature lie on
+      /// the normal through the anchor (ContactConstraintPoint::ca), so two floats
+      /// carry them (six would make each pass read 30% more).
+      alignas(32) float ca_n[kLanes] = {}, cb_n[kLanes] = {};
       /// Separation at the step's start (m): adjusted_separation + n.(rb - ra).
       alignas(32) float base_separation[kLanes] = {}, normal_mass[kLanes] = {};
       alignas(32) float tangent_mass[2][kLanes] = {};
