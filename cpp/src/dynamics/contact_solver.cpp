@@ -46,10 +46,11 @@ inline Vec3 relative_velocity(const BodyState& a, const BodyState& b, const Vec3
 
 }  // namespace
 
-void current_anchors(const BodyState& a, const BodyState& b, const ContactConstraintPoint& p, Vec3& ra,
-                     Vec3& rb) {
-  ra = p.ra + (a.dq * p.ca - p.ca);
-  rb = p.rb + (b.dq * p.cb - p.cb);
+void current_anchors(const BodyState& a, const BodyState& b, const ContactConstraintPoint& p, const Vec3& n,
+                     Vec3& ra, Vec3& rb) {
+  const Vec3 ca = p.ra + p.ca_n * n, cb = p.rb + p.cb_n * n;
+  ra = p.ra + (a.dq * ca - ca);
+  rb = p.rb + (b.dq * cb - cb);
 }
 
 void prepare_contacts(std::vector<ContactConstraint>& cs, const std::vector<BodyState>& states,
@@ -86,7 +87,7 @@ void warm_start_contacts(std::vector<ContactConstraint>& cs, std::vector<BodySta
       const Vec3 imp = p.normal_impulse * c.normal + p.tangent_impulse[0] * c.tangent1 +
                        p.tangent_impulse[1] * c.tangent2;
       Vec3 ra, rb;
-      current_anchors(a, b, p, ra, rb);
+      current_anchors(a, b, p, c.normal, ra, rb);
       apply(a, b, ra, rb, imp);
     }
   }
@@ -104,7 +105,7 @@ void solve_contacts(std::vector<ContactConstraint>& cs, std::vector<BodyState>& 
       // Current separation from the bodies' motion since the step began, at the current
       // anchors (turned with the bodies, see current_anchors).
       Vec3 ra, rb;
-      current_anchors(a, b, p, ra, rb);
+      current_anchors(a, b, p, c.normal, ra, rb);
       const Vec3 d = (b.dp + rb) - (a.dp + ra);
       const Real s = n.dot(d) + p.adjusted_separation;
       const Real normal_mass = row_mass(p.normal_mass, effective_mass(a, b, ra, rb, n), turn_sin2(a, b));
@@ -135,7 +136,7 @@ void solve_contacts(std::vector<ContactConstraint>& cs, std::vector<BodyState>& 
     for (int i = 0; i < c.count; ++i) {
       ContactConstraintPoint& p = c.points[i];
       Vec3 ra, rb;
-      current_anchors(a, b, p, ra, rb);
+      current_anchors(a, b, p, c.normal, ra, rb);
       const Vec3 dv = relative_velocity(a, b, ra, rb);
       Real t0 = p.tangent_impulse[0] - p.tangent_mass[0] * c.tangent1.dot(dv);
       Real t1 = p.tangent_impulse[1] - p.tangent_mass[1] * c.tangent2.dot(dv);
@@ -169,7 +170,7 @@ void apply_restitution(std::vector<ContactConstraint>& cs, std::vector<BodyState
       Real approach = p.relative_velocity;
       if (gn < 0 && p.push_gap > 0) approach = -std::sqrt(approach * approach - 2 * gn * p.push_gap);
       Vec3 ra, rb;
-      current_anchors(a, b, p, ra, rb);
+      current_anchors(a, b, p, c.normal, ra, rb);
       const Vec3& n = c.normal;
       const Real vn = n.dot(relative_velocity(a, b, ra, rb));
       Real impulse =

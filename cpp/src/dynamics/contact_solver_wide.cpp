@@ -75,6 +75,7 @@ WMO_INLINE V3 cross(const V3& a, const V3& b) {
 struct Bodies {
   V3 v, w, dp;
   v8 qx, qy, qz, qw;  // dq
+  v8 turn2;  // |dq.xyz|^2 (Row::turn2), carried through gather and scatter
 };
 
 /// Symmetric inverse inertia, lane by lane (xx, yy, zz, xy, xz, yz).
@@ -122,6 +123,7 @@ WMO_INLINE void gather_velocities(const std::array<int, L>& idx, const Row* rows
   gather_half(idx, rows, 0, c);
   b.v = V3{c[0], c[1], c[2]};
   b.w = V3{c[3], c[4], c[5]};
+  b.turn2 = c[6];
 }
 
 WMO_INLINE void gather_motion(const std::array<int, L>& idx, const Row* rows, Bodies& b) {
@@ -139,7 +141,7 @@ WMO_INLINE void gather_motion(const std::array<int, L>& idx, const Row* rows, Bo
 /// unchanged values.
 WMO_INLINE void scatter(const std::array<int, L>& idx, const Bodies& b, Row* rows) {
   const v8 zero = splat(0);
-  v8 c[8] = {b.v.x, b.v.y, b.v.z, b.w.x, b.w.y, b.w.z, zero, zero};
+  v8 c[8] = {b.v.x, b.v.y, b.v.z, b.w.x, b.w.y, b.w.z, b.turn2, zero};
   transpose8(c);
   for (int l = 0; l < L; ++l) std::memcpy(reinterpret_cast<char*>(rows + idx[l]), &c[l], 32);
 }
@@ -176,14 +178,27 @@ WMO_INLINE void turned_anchors(const Bodies& a, const Bodies& b, const Group::Po
   rb = rb0 + rotation_offset(b, rb0 + ld(p.cb_n) * n);
 }
 
+/// Turns below this (sin^2 of half the angle: 1e-5 rad) since the step began leave a
+/// group's warm start at the step's anchors (warm_start_groups).
+constexpr float kWarmStartTurnSin2 = 2.5e-11f;
+
 WMO_CLONES void warm_start_groups(const Group* groups, int count, Row* rows) {
   for (int k = 0; k < count; ++k) {
     const Group& g = groups[k];
     Bodies a{}, b{};
     gather_velocities(g.row_a, rows, a);
     gather_velocities(g.row_b, rows, b);
-    gather_motion(g.row_a, rows, a);
-    gather_motion(g.row_b, rows, b);
+    // The anchors turn with the bodies (turned_anchors) unless no body of the group
+    // has turned by more than kWarmStartTurn: then the turned anchors are the step's
+    // within 1e-5 of their levers, and the motion is not even gathered (half the warm
+    // start's time on the resting pyramid).
+    const v8 turn2 = vmax(a.turn2, b.turn2);
+    int turned = 0;
+    for (int l = 0; l < L; ++l) turned |= turn2[l] > kWarmStartTurnSin2;
+    if (turned) {
+      gather_motion(g.row_a, rows, a);
+      gather_motion(g.row_b, rows, b);
+    }
     const v8 ima = ld(g.inv_mass_a), imb = ld(g.inv_mass_b);
     const Inertia ia = ld_inertia(g.ia), ib = ld_inertia(g.ib);
     const V3 n = ld3(g.n), t1 = ld3(g.t1), t2 = ld3(g.t2);
@@ -191,7 +206,12 @@ WMO_CLONES void warm_start_groups(const Group* groups, int count, Row* rows) {
       const Group::Point& p = g.p[j];
       const V3 imp = ld(p.normal_impulse) * n + ld(p.tangent_impulse[0]) * t1 + ld(p.tangent_impulse[1]) * t2;
       V3 ra, rb;
-      turned_anchors(a, b, p, n, ra, rb);
+      if (turned) {
+        turned_anchors(a, b, p, n, ra, rb);
+      } else {
+        ra = ld3(p.ra);
+        rb = ld3(p.rb);
+      }
       apply(a, b, ima, imb, ia, ib, ra, rb, imp);
     }
     scatter(g.row_a, a, rows);
@@ -415,8 +435,8 @@ void WideContacts::build(const std::vector<ContactConstraint>& cs, const std::ve
           p.ra[r][lanes] = static_cast<float>(cp.ra[r]);
           p.rb[r][lanes] = static_cast<float>(cp.rb[r]);
         }
-        p.ca_n[lanes] = static_cast<float>(c.normal.dot(cp.ca - cp.ra));
-        p.cb_n[lanes] = static_cast<float>(c.normal.dot(cp.cb - cp.rb));
+        p.ca_n[lanes] = static_cast<float>(cp.ca_n);
+        p.cb_n[lanes] = static_cast<float>(cp.cb_n);
         // In double: adjusted_separation carries -n.(rb - ra), which may be large (an
         // anchor far out on a big ground box) where the separation itself is small.
         p.base_separation[lanes] = static_cast<float>(cp.adjusted_separation + c.normal.dot(cp.rb - cp.ra));
@@ -454,6 +474,7 @@ void WideContacts::load(const std::vector<BodyState>& states) {
     x.dq[1] = static_cast<float>(s.dq.y());
     x.dq[2] = static_cast<float>(s.dq.z());
     x.dq[3] = static_cast<float>(s.dq.w());
+    x.turn2 = static_cast<float>(s.dq.vec().squaredNorm());
     loaded_[r] = x;
   }
 }

@@ -706,7 +706,7 @@ bool single_manifold_shape(const Shape& s) {
 namespace {
 /// Radius of curvature (m) of body shape `s` at a contact whose outward surface normal
 /// (from the body into the other one) is `outward` (world), for the solver's anchors
-/// (ContactConstraintPoint::ca): the convex radius of the touching shape (a sphere's
+/// (ContactConstraintPoint::ca_n): the convex radius of the touching shape (a sphere's
 /// or capsule's radius, a rounded box's rounding, 0 for sharp shapes, meshes and
 /// planes), and a cylinder's radius where it touches with its side (the normal within
 /// 1e-3 of perpendicular to its axis: lying on it, it rolls); on a cap or the rim the
@@ -823,8 +823,10 @@ void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseO
       p.ra = mid - com_a;
       p.rb = mid - com_b;
       p.adjusted_separation = -cp.depth - m.normal.dot(p.rb - p.ra);
-      p.ca = cp.point_a - com_a - rho_a * m.normal;
-      p.cb = cp.point_b - com_b + rho_b * m.normal;
+      // Centres of curvature from each body's own touching point (point_a = mid +
+      // depth/2 n, point_b = mid - depth/2 n), as offsets along n from the anchor.
+      p.ca_n = 0.5 * cp.depth - rho_a;
+      p.cb_n = rho_b - 0.5 * cp.depth;
       p.feature_id = cp.feature_id;
       if (cached) {
         for (int j = 0; j < cached->count; ++j) {
@@ -1498,7 +1500,7 @@ std::vector<ContactInfo> World::contacts() const {
       // Separation after the step, from the bodies' motion over it, at the anchors as
       // the solver turned them.
       Vec3 ra, rb;
-      current_anchors(a, b, p, ra, rb);
+      current_anchors(a, b, p, c.normal, ra, rb);
       const Vec3 d = (b.dp + rb) - (a.dp + ra);
       const Real s = c.normal.dot(d) + p.adjusted_separation;
       ContactInfo ci;

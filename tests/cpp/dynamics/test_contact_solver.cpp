@@ -59,8 +59,8 @@ Scene random_scene(int bodies, int statics, int count, std::uint64_t seed) {
       p.rb = vec();
       // Centres of curvature, on the normal through the anchor (as World puts them):
       // the anchors turn with the bodies' dq about them.
-      p.ca = p.ra - 0.5 * (u(rng) + 1) * c.normal;
-      p.cb = p.rb + 0.5 * (u(rng) + 1) * c.normal;
+      p.ca_n = -0.5 * (u(rng) + 1);
+      p.cb_n = 0.5 * (u(rng) + 1);
       p.adjusted_separation = 0.02 * u(rng);  // some speculative, some penetrating
       p.normal_impulse = k % 3 == 0 ? 0 : 0.1 * (u(rng) + 1);
       p.tangent_impulse = {0.02 * u(rng), 0.02 * u(rng)};

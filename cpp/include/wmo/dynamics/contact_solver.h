@@ -66,19 +66,18 @@ struct ContactSoftness {
 struct ContactConstraintPoint {
   Vec3 ra = Vec3::Zero();  ///< anchor on A relative to A's COM at the step's start, m, world
   Vec3 rb = Vec3::Zero();  ///< anchor on B relative to B's COM, m, world
-  /// Centres of curvature of A's and of B's surface at the point, relative to each
-  /// body's COM (m, world, at the step's start): A's touching point moved into A by its
-  /// radius of curvature there (point_a - com_a - rho_a n), B's likewise (point_b -
-  /// com_b + rho_b n). Each is taken as a material point that turns with its body while
-  /// the touching point stays on the normal through it, so the anchors the rows use
-  /// move with it within the step (current_anchors): for a vertex or an edge (rho 0)
-  /// the point itself is material (a box corner: the row follows the corner); for a
-  /// sphere it is the centre (a spinning ball's contact stays at its bottom). Measured
-  /// from the body's own surface point, not from the anchor: a speculative contact's
-  /// anchor lies in the gap, away from both bodies. World sets them from the shapes.
-  /// WideContacts keeps only their components along n (the parts across n, if any,
-  /// are dropped there): World's lie on the normal through the anchor.
-  Vec3 ca = Vec3::Zero(), cb = Vec3::Zero();
+  /// Centres of curvature of A's and of B's surface at the point, as offsets along n
+  /// from the anchors (m): A's is ra + ca_n n, B's rb + cb_n n (relative to each COM,
+  /// world, at the step's start). World computes them from each body's own touching
+  /// point moved into the body by its radius of curvature there (point_a - rho_a n,
+  /// point_b + rho_b n), which lies on the normal through the anchor: a speculative
+  /// contact's anchor sits in the gap, away from both bodies, and the offsets carry
+  /// that. Each centre is taken as a material point that turns with its body while the
+  /// touching point stays on the normal through it, so the anchors the rows use move
+  /// with it within the step (current_anchors): for a vertex or an edge (rho 0) the
+  /// point itself is material (a box corner: the row follows the corner); for a sphere
+  /// it is the centre (a spinning ball's contact stays at its bottom).
+  Real ca_n = 0, cb_n = 0;
   /// Separation at the step's start minus n.(rb - ra) (m), so that the current
   /// separation is adjusted_separation + n.((dp_b + rb') - (dp_a + ra')) with the
   /// current anchors ra', rb' (current_anchors).
@@ -146,13 +145,13 @@ struct SolverSettings {
 };
 
 /// The anchors of point p at the bodies' current motion (dq since the step began): each
-/// moves as its body's centre of curvature at the point does (ContactConstraintPoint::ca),
-/// ra' = ra + (dq_a ca - ca), rb' = rb + (dq_b cb - cb). A vertex is carried as a
+/// moves as its body's centre of curvature at the point does (ContactConstraintPoint::ca_n),
+/// ra' = ra + (dq_a ca - ca) with ca = ra + ca_n n, likewise rb'. A vertex is carried as a
 /// material point; a sphere centred on its centre of mass keeps its anchor. Both the
 /// separation and the velocity rows use these, so the rows push at the point whose
 /// separation they correct.
-void current_anchors(const BodyState& a, const BodyState& b, const ContactConstraintPoint& p, Vec3& ra,
-                     Vec3& rb);
+void current_anchors(const BodyState& a, const BodyState& b, const ContactConstraintPoint& p, const Vec3& n,
+                     Vec3& ra, Vec3& rb);
 
 /// Turns since the step began up to this (sin^2 of half the angle: 0.05 rad) keep the
 /// step's effective masses outright (row_mass), without evaluating the turned ones.
@@ -260,10 +259,7 @@ class WideContacts {
     alignas(32) float fixed[kLanes] = {};
     struct Point {
       alignas(32) float ra[3][kLanes] = {}, rb[3][kLanes] = {};
-      /// ContactConstraintPoint::ca / cb as offsets along n from the anchors:
-      /// ca = ra + ca_n n, cb = rb + cb_n n (m). World's centres of curvature lie on
-      /// the normal through the anchor (ContactConstraintPoint::ca), so two floats
-      /// carry them (six would make each pass read 30% more).
+      /// ContactConstraintPoint::ca_n / cb_n.
       alignas(32) float ca_n[kLanes] = {}, cb_n[kLanes] = {};
       /// Separation at the step's start (m): adjusted_separation + n.(rb - ra).
       alignas(32) float base_separation[kLanes] = {}, normal_mass[kLanes] = {};
@@ -279,7 +275,9 @@ class WideContacts {
   /// A body as the passes see it: velocities and the motion since the step began.
   /// Row 0 is the padding lanes' body (at rest, never written back).
   struct alignas(64) Row {
-    float v[3], w[3], pad0[2];
+    /// turn2: |dq.xyz|^2, sin^2 of half the angle the body turned since the step began
+    /// (the warm start reads it with the velocities to skip turning still bodies).
+    float v[3], w[3], turn2, pad0;
     float dp[3], dq[4], pad1;  ///< dq as x, y, z, w
   };
   static_assert(sizeof(Row) == 64, "the passes move a row as two 32-byte halves");
