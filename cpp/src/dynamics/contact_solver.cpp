@@ -100,11 +100,13 @@ void solve_contacts(std::vector<ContactConstraint>& cs, std::vector<BodyState>& 
     BodyState& b = states[c.body_b];
     const Vec3& n = c.normal;
     const Softness& soft = a.inv_mass == 0 || b.inv_mass == 0 ? softness.fixed : softness.dynamic;
+    std::array<Vec3, std::tuple_size_v<decltype(c.points)>> anchor_a, anchor_b;  // current anchors, for the friction rows too
     for (int i = 0; i < c.count; ++i) {
       ContactConstraintPoint& p = c.points[i];
       // Current separation from the bodies' motion since the step began, at the current
       // anchors (turned with the bodies, see current_anchors).
-      Vec3 ra, rb;
+      Vec3& ra = anchor_a[i];
+      Vec3& rb = anchor_b[i];
       current_anchors(a, b, p, c.normal, ra, rb);
       const Vec3 d = (b.dp + rb) - (a.dp + ra);
       const Real s = n.dot(d) + p.adjusted_separation;
@@ -135,8 +137,8 @@ void solve_contacts(std::vector<ContactConstraint>& cs, std::vector<BodyState>& 
     if (c.friction == 0) continue;
     for (int i = 0; i < c.count; ++i) {
       ContactConstraintPoint& p = c.points[i];
-      Vec3 ra, rb;
-      current_anchors(a, b, p, c.normal, ra, rb);
+      const Vec3& ra = anchor_a[i];
+      const Vec3& rb = anchor_b[i];
       const Vec3 dv = relative_velocity(a, b, ra, rb);
       Real t0 = p.tangent_impulse[0] - p.tangent_mass[0] * c.tangent1.dot(dv);
       Real t1 = p.tangent_impulse[1] - p.tangent_mass[1] * c.tangent2.dot(dv);

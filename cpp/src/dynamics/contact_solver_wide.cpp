@@ -58,6 +58,12 @@ WMO_INLINE void st(float* p, v8 v) { std::memcpy(p, &v, sizeof v); }
 WMO_INLINE v8 splat(float x) { return v8{x, x, x, x, x, x, x, x}; }
 /// std::max(a, b) lane by lane: (a < b) ? b : a.
 WMO_INLINE v8 vmax(v8 a, v8 b) { return a < b ? b : a; }
+/// True if any lane of the mask is set.
+WMO_INLINE bool any(m8 m) {
+  int r = 0;
+  for (int l = 0; l < L; ++l) r |= m[l];
+  return r != 0;
+}
 
 struct V3 {
   v8 x, y, z;
@@ -192,9 +198,7 @@ WMO_CLONES void warm_start_groups(const Group* groups, int count, Row* rows) {
     // has turned by more than kWarmStartTurn: then the turned anchors are the step's
     // within 1e-5 of their levers, and the motion is not even gathered (half the warm
     // start's time on the resting pyramid).
-    const v8 turn2 = vmax(a.turn2, b.turn2);
-    int turned = 0;
-    for (int l = 0; l < L; ++l) turned |= turn2[l] > kWarmStartTurnSin2;
+    const bool turned = any(vmax(a.turn2, b.turn2) > splat(kWarmStartTurnSin2));
     if (turned) {
       gather_motion(g.row_a, rows, a);
       gather_motion(g.row_b, rows, b);
@@ -251,10 +255,8 @@ WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, SoftLanes dyn,
     // Lanes whose bodies turned by more than kRowMassTurn since the step began (the
     // others keep the step's effective mass, row_mass()); none: the turned masses are
     // not evaluated at all.
-    const v8 turn2 = vmax(a.qx * a.qx + a.qy * a.qy + a.qz * a.qz, b.qx * b.qx + b.qy * b.qy + b.qz * b.qz);
-    const m8 lane_turned = turn2 > splat(static_cast<float>(kRowMassTurnSin2));
-    int turned = 0;
-    for (int l = 0; l < L; ++l) turned |= lane_turned[l];
+    const m8 lane_turned = vmax(a.turn2, b.turn2) > splat(static_cast<float>(kRowMassTurnSin2));
+    const bool turned = any(lane_turned);
     V3 anchor_a[4], anchor_b[4];  // the points' current anchors, for the friction rows
     for (int j = 0; j < g.points; ++j) {
       Group::Point& p = g.p[j];
@@ -312,9 +314,7 @@ WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, SoftLanes dyn,
         const v8 limit = mu * ld(p.normal_impulse);
         const v8 len2 = x0 * x0 + x1 * x1;
         const m8 over = len2 > limit * limit;
-        int any_over = 0;
-        for (int l = 0; l < L; ++l) any_over |= over[l];
-        if (any_over) {
+        if (any(over)) {
           v8 scale = one;
           for (int l = 0; l < L; ++l)
             if (over[l]) scale[l] = len2[l] > 0 ? limit[l] / std::sqrt(len2[l]) : 0;

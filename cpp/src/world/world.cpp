@@ -701,9 +701,7 @@ namespace {
 bool single_manifold_shape(const Shape& s) {
   return s.type() != ShapeType::kCompound && s.type() != ShapeType::kTriangleMesh;
 }
-}  // namespace
 
-namespace {
 /// Radius of curvature (m) of body shape `s` at a contact whose outward surface normal
 /// (from the body into the other one) is `outward` (world), for the solver's anchors
 /// (ContactConstraintPoint::ca_n): the convex radius of the touching shape (a sphere's
