@@ -47,10 +47,8 @@ bool ray_aabb(const Vec3& origin, const Vec3& dir, const Aabb& box, Real max_t, 
   return detail::PreparedRay(origin, dir).hits(box, max_t, t_enter);
 }
 
-void Broadphase::require_live(const char* what, ProxyId id) const {
-  if (!is_live(id))
-    throw InvalidArgument(std::string(what) + ": proxy id " + std::to_string(id) +
-                          " is not a live proxy");
+void Broadphase::throw_not_live(const char* what, ProxyId id) {
+  throw InvalidArgument(std::string(what) + ": proxy id " + std::to_string(id) + " is not a live proxy");
 }
 
 ProxyId Broadphase::create_proxy(const Aabb& box, std::uint64_t user_data) {
@@ -105,15 +103,6 @@ void Broadphase::query_pairs(std::vector<ProxyPair>& out) {
   on_query_pairs(out);
 }
 
-const Aabb& Broadphase::aabb(ProxyId id) const {
-  require_live("aabb", id);
-  return tight_[static_cast<std::size_t>(id)];
-}
-
-std::uint64_t Broadphase::user_data(ProxyId id) const {
-  require_live("user_data", id);
-  return user_data_[static_cast<std::size_t>(id)];
-}
 
 // Linear scans: brute force and sweep and prune have no spatial hierarchy to descend.
 // (Sweep and prune could bisect its sorted array on the sweep axis, but the array is only

@@ -53,8 +53,8 @@ void current_anchors(const BodyState& a, const BodyState& b, const ContactConstr
   rb = p.rb + (b.dq * cb - cb);
 }
 
-void prepare_contacts(std::vector<ContactConstraint>& cs, const std::vector<BodyState>& states,
-                      const SolverSettings& s, Real h, ContactSoftness& soft) {
+ContactSoftness contact_softness(const SolverSettings& s, Real h) {
+  ContactSoftness soft;
   // Stiffer than a quarter of the substep rate and the spring is under-resolved by the
   // integrator (Box2D v3 caps contact_hertz the same way).
   const Real cap = 0.25 / h;
@@ -64,6 +64,12 @@ void prepare_contacts(std::vector<ContactConstraint>& cs, const std::vector<Body
   // rate: measured, a 100 kg box on a 1 kg one on the ground at 60 Hz and 4 substeps
   // then pumps the light box out, 38 cm in 100 s; capped, it stands).
   soft.fixed = make_softness(std::min(s.static_hertz_scale * hertz, cap), s.damping_ratio, h);
+  return soft;
+}
+
+void prepare_contacts(std::vector<ContactConstraint>& cs, const std::vector<BodyState>& states,
+                      const SolverSettings& s, Real h, ContactSoftness& soft) {
+  soft = contact_softness(s, h);
   for (ContactConstraint& c : cs) {
     const BodyState& a = states[c.body_a];
     const BodyState& b = states[c.body_b];

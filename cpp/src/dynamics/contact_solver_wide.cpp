@@ -10,10 +10,12 @@
 // is where the parallelism is (Box2D v3's "wide" contact solver; SCENES.md measures
 // scalar code on the pyramid's contact graph at 6.6x below an 8-wide version).
 //
-// The bodies the passes touch are copied into a compact array of 64-byte rows (v, w,
-// dp, dq in float), numbered in the order the groups first use them, so a pass reads
-// one cache line per body instead of a 208-byte double state; masses and inertias
-// travel with the constraints (they are fixed for the step).
+// The bodies the passes touch are copied into a compact array of 32-byte rows (v, w in
+// float), numbered in the order the groups first use them, so a pass reads half a cache
+// line per body instead of a 208-byte double state; masses and inertias travel with
+// the constraints (they are fixed for the step). The motion since the step began (dp,
+// dq) changes only between passes: set_motion turns each point's anchors with it once
+// (turn_groups), and the passes read the turned anchors, separations and masses.
 //
 // On x86-64 the kernels are compiled twice (GCC target_clones): for AVX2 (8 floats per
 // instruction) and for the baseline (SSE2, two halves); the loader picks one for the
@@ -33,6 +35,7 @@ typedef int m8 __attribute__((vector_size(32)));
 constexpr int L = WideContacts::kLanes;
 using Group = WideContacts::Group;
 using Row = WideContacts::Row;
+using MotionRow = WideContacts::MotionRow;
 
 /// A body the passes change; the others (zero inverse mass: static and kinematic) only
 /// receive exact zeros, so constraints may share them. The level order and the grouping
@@ -58,11 +61,21 @@ WMO_INLINE void st(float* p, v8 v) { std::memcpy(p, &v, sizeof v); }
 WMO_INLINE v8 splat(float x) { return v8{x, x, x, x, x, x, x, x}; }
 /// std::max(a, b) lane by lane: (a < b) ? b : a.
 WMO_INLINE v8 vmax(v8 a, v8 b) { return a < b ? b : a; }
+/// Square root lane by lane. This file is compiled without errno for the math
+/// functions (CMakeLists.txt), so the loop becomes one vector square root (correctly
+/// rounded, as std::sqrt).
+WMO_INLINE v8 vsqrt(v8 x) {
+  v8 r;
+  for (int l = 0; l < L; ++l) r[l] = __builtin_sqrtf(x[l]);
+  return r;
+}
 /// True if any lane of the mask is set.
 WMO_INLINE bool any(m8 m) {
-  int r = 0;
-  for (int l = 0; l < L; ++l) r |= m[l];
-  return r != 0;
+  // Halves folded onto each other (three shuffles), not eight lane extractions.
+  m8 r = m | __builtin_shufflevector(m, m, 4, 5, 6, 7, 0, 1, 2, 3);
+  r = r | __builtin_shufflevector(r, r, 2, 3, 0, 1, 6, 7, 4, 5);
+  r = r | __builtin_shufflevector(r, r, 1, 0, 3, 2, 5, 4, 7, 6);
+  return r[0] != 0;
 }
 
 struct V3 {
@@ -77,13 +90,6 @@ WMO_INLINE V3 cross(const V3& a, const V3& b) {
   return V3{a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
 }
 
-/// The bodies of one side of a group, lane by lane.
-struct Bodies {
-  V3 v, w, dp;
-  v8 qx, qy, qz, qw;  // dq
-  v8 turn2;  // |dq.xyz|^2 (Row::turn2), carried through gather and scatter
-};
-
 /// Symmetric inverse inertia, lane by lane (xx, yy, zz, xy, xz, yz).
 struct Inertia {
   v8 xx, yy, zz, xy, xz, yz;
@@ -94,6 +100,24 @@ WMO_INLINE Inertia ld_inertia(const float (*p)[L]) {
 WMO_INLINE V3 mul(const Inertia& m, const V3& x) {
   return V3{m.xx * x.x + m.xy * x.y + m.xz * x.z, m.xy * x.x + m.yy * x.y + m.yz * x.z,
             m.xz * x.x + m.yz * x.y + m.zz * x.z};
+}
+
+/// A group's inverse masses and world inverse inertias, lane by lane (fixed for the step).
+struct Masses {
+  v8 ima, imb;
+  Inertia ia, ib;
+};
+WMO_INLINE Masses ld_masses(const Group& g) {
+  return Masses{ld(g.inv_mass_a), ld(g.inv_mass_b), ld_inertia(g.ia), ld_inertia(g.ib)};
+}
+/// The effective mass (kg) of a row along `dir` at anchors ra, rb: 1 / (inverse masses
+/// plus angular terms), effective_mass() of contact_solver.cpp; 0 where the row moves
+/// nothing.
+WMO_INLINE v8 effective_mass(const Masses& m, const V3& ra, const V3& rb, const V3& dir) {
+  const V3 cra = cross(ra, dir), crb = cross(rb, dir);
+  const v8 k = m.ima + m.imb + dot(cra, mul(m.ia, cra)) + dot(crb, mul(m.ib, crb));
+  const v8 zero = splat(0);
+  return k > zero ? splat(1) / k : zero;
 }
 
 /// An 8 x 8 transpose: on return c[j][l] = r[l][j] (the AVX 8 x 8 float transpose:
@@ -116,107 +140,152 @@ WMO_INLINE void transpose8(v8 (&r)[8]) {
   }
 }
 
-/// Half `half` (0: v, w; 1: dp, dq) of the 8 rows, transposed: c[j] holds float j of
-/// that half for every lane.
-WMO_INLINE void gather_half(const std::array<int, L>& idx, const Row* rows, int half, v8 (&c)[8]) {
-  // Bytes of the row (its object representation): 32 from the start of the half.
-  for (int l = 0; l < L; ++l) std::memcpy(&c[l], reinterpret_cast<const char*>(rows + idx[l]) + 32 * half, 32);
+/// The 8 rows of 8 floats (32 bytes) at idx, transposed: c[j] holds float j of every
+/// lane's row.
+template <class R>
+WMO_INLINE void gather_rows(const std::array<int, L>& idx, const R* rows, v8 (&c)[8]) {
+  static_assert(sizeof(R) == 32, "one row is one 8-float register");
+  for (int l = 0; l < L; ++l) std::memcpy(&c[l], rows + idx[l], 32);
   transpose8(c);
 }
 
-WMO_INLINE void gather_velocities(const std::array<int, L>& idx, const Row* rows, Bodies& b) {
+/// One side of a group: its bodies' velocities, lane by lane.
+struct Bodies {
+  V3 v, w;
+};
+
+WMO_INLINE Bodies gather_velocities(const std::array<int, L>& idx, const Row* rows) {
   v8 c[8];
-  gather_half(idx, rows, 0, c);
-  b.v = V3{c[0], c[1], c[2]};
-  b.w = V3{c[3], c[4], c[5]};
-  b.turn2 = c[6];
+  gather_rows(idx, rows, c);
+  return Bodies{V3{c[0], c[1], c[2]}, V3{c[3], c[4], c[5]}};
 }
 
-WMO_INLINE void gather_motion(const std::array<int, L>& idx, const Row* rows, Bodies& b) {
-  v8 c[8];
-  gather_half(idx, rows, 1, c);
-  b.dp = V3{c[0], c[1], c[2]};
-  b.qx = c[3];
-  b.qy = c[4];
-  b.qz = c[5];
-  b.qw = c[6];
-}
-
-/// Velocities back: the first half of each row (v, w, padding). Lanes that share a
-/// body that does not move (static, kinematic, the padding row) write the same
-/// unchanged values.
+/// Velocities back. Lanes that share a body that does not move (static, kinematic, the
+/// padding row) write the same unchanged values.
 WMO_INLINE void scatter(const std::array<int, L>& idx, const Bodies& b, Row* rows) {
   const v8 zero = splat(0);
-  v8 c[8] = {b.v.x, b.v.y, b.v.z, b.w.x, b.w.y, b.w.z, b.turn2, zero};
+  v8 c[8] = {b.v.x, b.v.y, b.v.z, b.w.x, b.w.y, b.w.z, zero, zero};
   transpose8(c);
-  for (int l = 0; l < L; ++l) std::memcpy(reinterpret_cast<char*>(rows + idx[l]), &c[l], 32);
+  for (int l = 0; l < L; ++l) std::memcpy(rows + idx[l], &c[l], 32);
+}
+
+/// One side of a group: its bodies' motion since the step began, lane by lane.
+struct Motion {
+  V3 dp;
+  v8 qx, qy, qz, qw;  // dq
+  v8 turn2;           // |dq.xyz|^2
+};
+
+WMO_INLINE Motion gather_motion(const std::array<int, L>& idx, const MotionRow* rows) {
+  v8 c[8];
+  gather_rows(idx, rows, c);
+  return Motion{V3{c[0], c[1], c[2]}, c[3], c[4], c[5], c[6], c[7]};
 }
 
 /// dq * r - r, the anchor's displacement by the rotation since the step began (Eigen's
 /// quaternion-vector product without its leading r: uv = 2 q x r, w uv + q x uv), so
 /// that no large anchor is added and cancelled again.
-WMO_INLINE V3 rotation_offset(const Bodies& b, const V3& r) {
-  const V3 q{b.qx, b.qy, b.qz};
+WMO_INLINE V3 rotation_offset(const Motion& m, const V3& r) {
+  const V3 q{m.qx, m.qy, m.qz};
   V3 uv = cross(q, r);
   uv = uv + uv;
-  return b.qw * uv + cross(q, uv);
+  return m.qw * uv + cross(q, uv);
 }
 
 /// apply() of contact_solver.cpp: impulse p at anchors ra (on a) and rb (on b).
-WMO_INLINE void apply(Bodies& a, Bodies& b, v8 ima, v8 imb, const Inertia& ia, const Inertia& ib, const V3& ra,
-                      const V3& rb, const V3& p) {
-  a.v = a.v - ima * p;
-  a.w = a.w - mul(ia, cross(ra, p));
-  b.v = b.v + imb * p;
-  b.w = b.w + mul(ib, cross(rb, p));
+WMO_INLINE void apply(Bodies& a, Bodies& b, const Masses& m, const V3& ra, const V3& rb, const V3& p) {
+  a.v = a.v - m.ima * p;
+  a.w = a.w - mul(m.ia, cross(ra, p));
+  b.v = b.v + m.imb * p;
+  b.w = b.w + mul(m.ib, cross(rb, p));
 }
 
 WMO_INLINE V3 relative_velocity(const Bodies& a, const Bodies& b, const V3& ra, const V3& rb) {
   return (b.v + cross(b.w, rb)) - (a.v + cross(a.w, ra));
 }
 
-/// current_anchors() of contact_solver.cpp: point p's anchors turned with the bodies
-/// about their centres of curvature.
-WMO_INLINE void turned_anchors(const Bodies& a, const Bodies& b, const Group::Point& p, const V3& n, V3& ra,
-                               V3& rb) {
-  const V3 ra0 = ld3(p.ra), rb0 = ld3(p.rb);
-  ra = ra0 + rotation_offset(a, ra0 + ld(p.ca_n) * n);
-  rb = rb0 + rotation_offset(b, rb0 + ld(p.cb_n) * n);
+/// What the passes read of the motion, for the motion in `rows` (WideContacts::
+/// set_motion): per point its anchors turned with the bodies about their centres of
+/// curvature (current_anchors of contact_solver.cpp), its separation now (at the step's
+/// start plus the change the motion made) and its effective mass (row_mass). The
+/// motion changes only between passes (integrate_positions), so the passes share these
+/// instead of each turning the anchors again.
+WMO_CLONES void turn_groups(Group* groups, int count, const MotionRow* rows) {
+  const v8 zero = splat(0);
+  for (int k = 0; k < count; ++k) {
+    Group& g = groups[k];
+    const Motion a = gather_motion(g.row_a, rows), b = gather_motion(g.row_b, rows);
+    const Masses m = ld_masses(g);
+    const V3 n = ld3(g.n);
+    const V3 dp = b.dp - a.dp;
+    // Lanes whose bodies turned by more than kRowMassTurn since the step began (the
+    // others keep the step's effective mass, row_mass()); none: the turned masses are
+    // not evaluated at all.
+    const m8 lane_turned = vmax(a.turn2, b.turn2) > splat(static_cast<float>(kRowMassTurnSin2));
+    const bool turned = any(lane_turned);
+    for (int j = 0; j < g.points; ++j) {
+      Group::Point& p = g.p[j];
+      const V3 ra0 = ld3(p.ra), rb0 = ld3(p.rb);
+      const V3 ra = ra0 + rotation_offset(a, ra0 + ld(p.ca_n) * n);
+      const V3 rb = rb0 + rotation_offset(b, rb0 + ld(p.cb_n) * n);
+      const V3 d = dp + ((rb - rb0) - (ra - ra0));
+      st(p.separation, dot(n, d) + ld(p.base_separation));
+      // row_mass(): the step's effective mass unless the one at the turned anchors
+      // differs from it by more than 10%. A padding point (a lane with fewer points,
+      // or a padding lane) has a stale mass of 0 and must keep it: it pushes nothing.
+      v8 normal_mass = ld(p.normal_mass);
+      if (turned) {
+        const v8 current = effective_mass(m, ra, rb, n);
+        const v8 diff = normal_mass - current;
+        const m8 keep = (vmax(diff, -diff) <= splat(0.1f) * current) | (normal_mass == zero) | ~lane_turned;
+        normal_mass = keep ? normal_mass : current;
+      }
+      st(p.mass_now, normal_mass);
+      for (int r = 0; r < 3; ++r) {
+        st(p.ra_now[r], r == 0 ? ra.x : r == 1 ? ra.y : ra.z);
+        st(p.rb_now[r], r == 0 ? rb.x : r == 1 ? rb.y : rb.z);
+      }
+    }
+  }
 }
 
-/// Turns below this (sin^2 of half the angle: 1e-5 rad) since the step began leave a
-/// group's warm start at the step's anchors (warm_start_groups).
-constexpr float kWarmStartTurnSin2 = 2.5e-11f;
+/// prepare_contacts() of contact_solver.cpp, lane by lane: each point's effective
+/// masses along n, t1 and t2 at the step's anchors and its approach velocity n.(v_b -
+/// v_a) at the velocities in `rows`. Padding points (past a lane's count, and padding
+/// lanes) get masses of 0: they push nothing.
+WMO_CLONES void prepare_groups(Group* groups, int count, const Row* rows) {
+  const v8 zero = splat(0);
+  for (int k = 0; k < count; ++k) {
+    Group& g = groups[k];
+    const Bodies a = gather_velocities(g.row_a, rows), b = gather_velocities(g.row_b, rows);
+    const Masses m = ld_masses(g);
+    const V3 n = ld3(g.n), t1 = ld3(g.t1), t2 = ld3(g.t2);
+    const v8 points = ld(g.count);
+    auto mass = [&](const V3& ra, const V3& rb, const V3& dir, m8 real) {
+      return real ? effective_mass(m, ra, rb, dir) : zero;
+    };
+    for (int j = 0; j < g.points; ++j) {
+      Group::Point& p = g.p[j];
+      const m8 real = splat(static_cast<float>(j)) < points;
+      const V3 ra = ld3(p.ra), rb = ld3(p.rb);
+      st(p.normal_mass, mass(ra, rb, n, real));
+      st(p.tangent_mass[0], mass(ra, rb, t1, real));
+      st(p.tangent_mass[1], mass(ra, rb, t2, real));
+      st(p.relative_velocity, dot(n, relative_velocity(a, b, ra, rb)));
+    }
+  }
+}
 
 WMO_CLONES void warm_start_groups(const Group* groups, int count, Row* rows) {
   for (int k = 0; k < count; ++k) {
     const Group& g = groups[k];
-    Bodies a{}, b{};
-    gather_velocities(g.row_a, rows, a);
-    gather_velocities(g.row_b, rows, b);
-    // The anchors turn with the bodies (turned_anchors) unless no body of the group
-    // has turned by more than kWarmStartTurn: then the turned anchors are the step's
-    // within 1e-5 of their levers, and the motion is not even gathered (half the warm
-    // start's time on the resting pyramid).
-    const bool turned = any(vmax(a.turn2, b.turn2) > splat(kWarmStartTurnSin2));
-    if (turned) {
-      gather_motion(g.row_a, rows, a);
-      gather_motion(g.row_b, rows, b);
-    }
-    const v8 ima = ld(g.inv_mass_a), imb = ld(g.inv_mass_b);
-    const Inertia ia = ld_inertia(g.ia), ib = ld_inertia(g.ib);
+    Bodies a = gather_velocities(g.row_a, rows), b = gather_velocities(g.row_b, rows);
+    const Masses m = ld_masses(g);
     const V3 n = ld3(g.n), t1 = ld3(g.t1), t2 = ld3(g.t2);
     for (int j = 0; j < g.points; ++j) {
       const Group::Point& p = g.p[j];
       const V3 imp = ld(p.normal_impulse) * n + ld(p.tangent_impulse[0]) * t1 + ld(p.tangent_impulse[1]) * t2;
-      V3 ra, rb;
-      if (turned) {
-        turned_anchors(a, b, p, n, ra, rb);
-      } else {
-        ra = ld3(p.ra);
-        rb = ld3(p.rb);
-      }
-      apply(a, b, ima, imb, ia, ib, ra, rb, imp);
+      apply(a, b, m, ld3(p.ra_now), ld3(p.rb_now), imp);
     }
     scatter(g.row_a, a, rows);
     scatter(g.row_b, b, rows);
@@ -243,41 +312,15 @@ WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, SoftLanes dyn,
     const v8 bias_rate = fixed ? bias_rate_fix : bias_rate_dyn;
     const v8 soft_mass = fixed ? soft_mass_fix : soft_mass_dyn;
     const v8 soft_impulse = fixed ? soft_impulse_fix : soft_impulse_dyn;
-    Bodies a{}, b{};
-    gather_velocities(g.row_a, rows, a);
-    gather_velocities(g.row_b, rows, b);
-    gather_motion(g.row_a, rows, a);
-    gather_motion(g.row_b, rows, b);
-    const v8 ima = ld(g.inv_mass_a), imb = ld(g.inv_mass_b);
-    const Inertia ia = ld_inertia(g.ia), ib = ld_inertia(g.ib);
+    Bodies a = gather_velocities(g.row_a, rows), b = gather_velocities(g.row_b, rows);
+    const Masses m = ld_masses(g);
     const V3 n = ld3(g.n);
-    const V3 dp = b.dp - a.dp;
-    // Lanes whose bodies turned by more than kRowMassTurn since the step began (the
-    // others keep the step's effective mass, row_mass()); none: the turned masses are
-    // not evaluated at all.
-    const m8 lane_turned = vmax(a.turn2, b.turn2) > splat(static_cast<float>(kRowMassTurnSin2));
-    const bool turned = any(lane_turned);
-    V3 anchor_a[4], anchor_b[4];  // the points' current anchors, for the friction rows
     for (int j = 0; j < g.points; ++j) {
       Group::Point& p = g.p[j];
-      V3& ra = anchor_a[j];
-      V3& rb = anchor_b[j];
-      turned_anchors(a, b, p, n, ra, rb);
-      // Separation now: at the step's start plus the change the motion made.
-      const V3 d = dp + ((rb - ld3(p.rb)) - (ra - ld3(p.ra)));
-      const v8 s = dot(n, d) + ld(p.base_separation);
-      // row_mass(): the step's effective mass unless the one at the turned anchors
-      // differs from it by more than 10%. A padding point (a lane with fewer points,
-      // or a padding lane) has a stale mass of 0 and must keep it: it pushes nothing.
-      v8 normal_mass = ld(p.normal_mass);
-      if (turned) {
-        const V3 cra = cross(ra, n), crb = cross(rb, n);
-        const v8 k_n = ima + imb + dot(cra, mul(ia, cra)) + dot(crb, mul(ib, crb));
-        const v8 current = k_n > zero ? one / k_n : zero;
-        const v8 diff = normal_mass - current;
-        const m8 keep = (vmax(diff, -diff) <= splat(0.1f) * current) | (normal_mass == zero) | ~lane_turned;
-        normal_mass = keep ? normal_mass : current;
-      }
+      // The anchors, separation and effective mass at the current motion (turn_groups).
+      const V3 ra = ld3(p.ra_now), rb = ld3(p.rb_now);
+      const v8 s = ld(p.separation);
+      const v8 normal_mass = ld(p.mass_now);
       // s > 0: speculative (bias s / h, full mass, no decay); otherwise the soft bias
       // when use_bias, else none.
       const m8 spec = s > zero;
@@ -296,7 +339,7 @@ WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, SoftLanes dyn,
       st(p.relative_velocity, first ? vn : ld(p.relative_velocity));
       st(p.push_gap, first ? vmax(s, zero) : ld(p.push_gap));
       st(p.max_normal_impulse, vmax(max_ni, impulse));
-      apply(a, b, ima, imb, ia, ib, ra, rb, impulse * n);
+      apply(a, b, m, ra, rb, impulse * n);
     }
     if (g.friction) {
       const V3 t1 = ld3(g.t1), t2 = ld3(g.t2);
@@ -304,8 +347,7 @@ WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, SoftLanes dyn,
       const m8 has_mu = mu != zero;
       for (int j = 0; j < g.points; ++j) {
         Group::Point& p = g.p[j];
-        const V3& ra = anchor_a[j];
-        const V3& rb = anchor_b[j];
+        const V3 ra = ld3(p.ra_now), rb = ld3(p.rb_now);
         const V3 dv = relative_velocity(a, b, ra, rb);
         const v8 ti0 = ld(p.tangent_impulse[0]), ti1 = ld(p.tangent_impulse[1]);
         v8 x0 = ti0 - ld(p.tangent_mass[0]) * dot(t1, dv);
@@ -314,10 +356,10 @@ WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, SoftLanes dyn,
         const v8 limit = mu * ld(p.normal_impulse);
         const v8 len2 = x0 * x0 + x1 * x1;
         const m8 over = len2 > limit * limit;
+        // Where over, len2 > limit^2 >= 0, so the root is positive; the other lanes'
+        // quotients (possibly 0 / 0) are discarded.
         if (any(over)) {
-          v8 scale = one;
-          for (int l = 0; l < L; ++l)
-            if (over[l]) scale[l] = len2[l] > 0 ? limit[l] / std::sqrt(len2[l]) : 0;
+          const v8 scale = limit / vsqrt(len2);
           x0 = over ? x0 * scale : x0;
           x1 = over ? x1 * scale : x1;
         }
@@ -328,7 +370,7 @@ WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, SoftLanes dyn,
         const v8 d0 = x0 - ti0, d1 = x1 - ti1;
         st(p.tangent_impulse[0], x0);
         st(p.tangent_impulse[1], x1);
-        apply(a, b, ima, imb, ia, ib, ra, rb, d0 * t1 + d1 * t2);
+        apply(a, b, m, ra, rb, d0 * t1 + d1 * t2);
       }
     }
     scatter(g.row_a, a, rows);
@@ -426,6 +468,7 @@ void WideContacts::build(const std::vector<ContactConstraint>& cs, const std::ve
       }
       g.mu[lanes] = static_cast<float>(c.friction);
       g.fixed[lanes] = !moves(sa) || !moves(sb) ? 1.0f : 0.0f;
+      g.count[lanes] = static_cast<float>(c.count);
       g.friction = g.friction || c.friction != 0;
       g.points = std::max(g.points, c.count);
       for (int j = 0; j < c.count; ++j) {
@@ -440,14 +483,9 @@ void WideContacts::build(const std::vector<ContactConstraint>& cs, const std::ve
         // In double: adjusted_separation carries -n.(rb - ra), which may be large (an
         // anchor far out on a big ground box) where the separation itself is small.
         p.base_separation[lanes] = static_cast<float>(cp.adjusted_separation + c.normal.dot(cp.rb - cp.ra));
-        p.normal_mass[lanes] = static_cast<float>(cp.normal_mass);
-        p.tangent_mass[0][lanes] = static_cast<float>(cp.tangent_mass[0]);
-        p.tangent_mass[1][lanes] = static_cast<float>(cp.tangent_mass[1]);
         p.normal_impulse[lanes] = static_cast<float>(cp.normal_impulse);
         p.tangent_impulse[0][lanes] = static_cast<float>(cp.tangent_impulse[0]);
         p.tangent_impulse[1][lanes] = static_cast<float>(cp.tangent_impulse[1]);
-        p.max_normal_impulse[lanes] = static_cast<float>(cp.max_normal_impulse);
-        p.relative_velocity[lanes] = static_cast<float>(cp.relative_velocity);
         p.push_gap[lanes] = static_cast<float>(cp.push_gap);
       }
       source_.push_back(k);
@@ -458,6 +496,25 @@ void WideContacts::build(const std::vector<ContactConstraint>& cs, const std::ve
   }
   rows_.assign(row_state_.size(), Row{});
   loaded_.assign(row_state_.size(), Row{});
+  motion_.assign(row_state_.size(), MotionRow{});
+  load(states);
+  prepare_groups(groups_.data(), group_count(), rows_.data());
+  set_motion(states);
+}
+
+void WideContacts::set_motion(const std::vector<BodyState>& states) {
+  const int n = static_cast<int>(row_state_.size());
+  for (int r = 0; r < n; ++r) {
+    const BodyState& s = states[row_state_[r]];
+    MotionRow& x = motion_[r];
+    for (int c = 0; c < 3; ++c) x.dp[c] = static_cast<float>(s.dp[c]);
+    x.dq[0] = static_cast<float>(s.dq.x());
+    x.dq[1] = static_cast<float>(s.dq.y());
+    x.dq[2] = static_cast<float>(s.dq.z());
+    x.dq[3] = static_cast<float>(s.dq.w());
+    x.turn2 = static_cast<float>(s.dq.vec().squaredNorm());
+  }
+  turn_groups(groups_.data(), group_count(), motion_.data());
 }
 
 void WideContacts::load(const std::vector<BodyState>& states) {
@@ -468,13 +525,7 @@ void WideContacts::load(const std::vector<BodyState>& states) {
     for (int c = 0; c < 3; ++c) {
       x.v[c] = static_cast<float>(s.v[c]);
       x.w[c] = static_cast<float>(s.w[c]);
-      x.dp[c] = static_cast<float>(s.dp[c]);
     }
-    x.dq[0] = static_cast<float>(s.dq.x());
-    x.dq[1] = static_cast<float>(s.dq.y());
-    x.dq[2] = static_cast<float>(s.dq.z());
-    x.dq[3] = static_cast<float>(s.dq.w());
-    x.turn2 = static_cast<float>(s.dq.vec().squaredNorm());
     loaded_[r] = x;
   }
 }
@@ -527,6 +578,7 @@ void WideContacts::unpack(std::vector<ContactConstraint>& cs) const {
         cp.max_normal_impulse = p.max_normal_impulse[l];
         cp.relative_velocity = p.relative_velocity[l];
         cp.push_gap = p.push_gap[l];
+        cp.normal_mass = p.normal_mass[l];
       }
     }
   }

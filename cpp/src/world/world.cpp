@@ -739,9 +739,12 @@ void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseO
   cs.margin = margin;
   out.manifolds.clear();
   const Pose pose_a(positions_[a], orientations_[a]), pose_b(positions_[b], orientations_[b]);
+  // The rotations as matrices: a pair rotates a dozen vectors (a reused manifold's
+  // points, the normal, the centres of mass), a matrix product each.
+  const Mat3 rot_a = orientations_[a].toRotationMatrix(), rot_b = orientations_[b].toRotationMatrix();
   // B relative to A, as the manifold cache stores it.
   const Quat qa_inv = orientations_[a].conjugate();
-  const Vec3 rel_p = qa_inv * (positions_[b] - positions_[a]);
+  const Vec3 rel_p = rot_a.transpose() * (positions_[b] - positions_[a]);
   const Quat rel_q = qa_inv * orientations_[b];
   const bool cacheable = single_manifold_shape(*shapes_[a]) && single_manifold_shape(*shapes_[b]);
   const ManifoldGeometry* reuse = nullptr;
@@ -755,7 +758,7 @@ void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseO
       // |q1 . q2| = cos(half the angle between the rotations).
       const Real cos_half = std::abs(rel_q.dot(g.rel_rotation));
       if (d2 <= settings_.manifold_reuse_distance * settings_.manifold_reuse_distance &&
-          cos_half >= std::cos(0.5 * settings_.manifold_reuse_angle))
+          cos_half >= reuse_cos_half_)
         reuse = &g;
     }
   }
@@ -763,11 +766,11 @@ void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseO
     // The cached points carried along with their bodies; depths measured anew along
     // the (A-fixed) normal: depth = n . (point_a - point_b).
     Manifold& m = out.manifolds.emplace_back();
-    m.normal = orientations_[a] * reuse->normal;
+    m.normal = rot_a * reuse->normal;
     m.count = 0;
     for (int k = 0; k < reuse->count; ++k) {
-      const Vec3 p_a = pose_a.transform_point(reuse->point_a[k]);
-      const Vec3 p_b = pose_b.transform_point(reuse->point_b[k]);
+      const Vec3 p_a = rot_a * reuse->point_a[k] + positions_[a];
+      const Vec3 p_b = rot_b * reuse->point_b[k] + positions_[b];
       m.add(p_a, p_b, m.normal.dot(p_a - p_b), reuse->feature_id[k]);
     }
     ++out.reused;
@@ -784,15 +787,16 @@ void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseO
     geometry.valid = true;
     geometry.rel_position = rel_p;
     geometry.rel_rotation = rel_q;
-    geometry.normal = qa_inv * m.normal;
+    geometry.normal = rot_a.transpose() * m.normal;
     geometry.count = m.count;
     for (int k = 0; k < m.count; ++k) {
-      geometry.point_a[k] = pose_a.inverse_transform_point(m.points[k].point_a);
-      geometry.point_b[k] = pose_b.inverse_transform_point(m.points[k].point_b);
+      geometry.point_a[k] = rot_a.transpose() * (m.points[k].point_a - positions_[a]);  // inverse_transform_point
+      geometry.point_b[k] = rot_b.transpose() * (m.points[k].point_b - positions_[b]);
       geometry.feature_id[k] = m.points[k].feature_id;
     }
   }
-  const Vec3 com_a = world_com(a), com_b = world_com(b);
+  const Vec3 com_a = positions_[a] + rot_a * masses_[a].local_com;  // world_com
+  const Vec3 com_b = positions_[b] + rot_b * masses_[b].local_com;
   const Real mu = combine(settings_.friction_combine, frictions_[a], frictions_[b]);
   const Real e = combine(settings_.restitution_combine, restitutions_[a], restitutions_[b]);
   for (const Manifold& m : out.manifolds) {
@@ -934,6 +938,7 @@ void World::run_step() {
   }
 
   // ---- narrowphase: manifolds, matched to the cache by feature id. ----
+  reuse_cos_half_ = std::cos(0.5 * settings_.manifold_reuse_angle);
   constraints_.clear();
   constraint_keys_.clear();
   constraint_geometry_.clear();
@@ -1108,10 +1113,9 @@ void World::run_step() {
       if (block_size == kFreeBlock) flush_block();
     }
     flush_block();
-    ContactSoftness soft;
+    const ContactSoftness soft = contact_softness(settings_.solver, h);
     const bool contacts = !constraints_.empty();
     if (contacts) {
-      prepare_contacts(constraints_, states_, settings_.solver, h, soft);
       // The passes run on lane groups, in an order equivalent to the constraints'
       // sequence (pairs top down) that keeps the groups full.
       dependency_level_order(constraints_, states_, solve_order_, level_scratch_);
@@ -1125,9 +1129,11 @@ void World::run_step() {
           wide_.solve(states_, soft, inv_h, settings_.solver.push_max, true);
       }
       integrate_positions(h);
-      if (contacts)
+      if (contacts) {
+        wide_.set_motion(states_);  // the relax passes and the next substep see the new motion
         for (int it = 0; it < settings_.relax_iterations; ++it)  // alternating: WorldSettings::relax_iterations
           wide_.solve(states_, soft, inv_h, settings_.solver.push_max, false, it % 2 == 1);
+      }
     }
     if (contacts) wide_.unpack(constraints_);
   }

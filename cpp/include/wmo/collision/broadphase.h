@@ -189,10 +189,19 @@ class Broadphase {
   bool is_live(ProxyId id) const {
     return id >= 0 && id < id_capacity() && live_[static_cast<std::size_t>(id)] != 0;
   }
-  /// Tight box of a live proxy, as last given (unit: m). Throws on a bad id.
-  const Aabb& aabb(ProxyId id) const;
+  /// Tight box of a live proxy, as last given (unit: m). Throws on a bad id. (Inline:
+  /// the world reads it for every pair of every step.)
+  const Aabb& aabb(ProxyId id) const {
+    if (!is_live(id)) [[unlikely]]
+      throw_not_live("aabb", id);
+    return tight_[static_cast<std::size_t>(id)];
+  }
   /// User data of a live proxy. Throws on a bad id.
-  std::uint64_t user_data(ProxyId id) const;
+  std::uint64_t user_data(ProxyId id) const {
+    if (!is_live(id)) [[unlikely]]
+      throw_not_live("user_data", id);
+    return user_data_[static_cast<std::size_t>(id)];
+  }
 
   virtual BroadphaseStats stats() const;
 
@@ -217,7 +226,11 @@ class Broadphase {
   const Aabb& tight(ProxyId id) const { return tight_[static_cast<std::size_t>(id)]; }
 
  private:
-  void require_live(const char* what, ProxyId id) const;
+  void require_live(const char* what, ProxyId id) const {
+    if (!is_live(id)) throw_not_live(what, id);
+  }
+  /// Throws InvalidArgument: `id` is not a live proxy (`what` names the call).
+  [[noreturn]] static void throw_not_live(const char* what, ProxyId id);
 
   std::vector<Aabb> tight_;                // by id
   std::vector<std::uint64_t> user_data_;   // by id

@@ -172,8 +172,12 @@ inline Real row_mass(Real stale, Real current, Real turn_sin2) {
   return std::abs(stale - current) <= 0.1 * current ? stale : current;
 }
 
-/// Computes effective masses and softness for `h` (the substep). States must hold
-/// inv_mass / inv_inertia; constraints their normal and tangents.
+/// The contacts' softness for the substep `h` (s), from the settings' spring.
+ContactSoftness contact_softness(const SolverSettings& s, Real h);
+/// Computes effective masses and approach velocities for the scalar passes, and the
+/// softness for `h` (the substep). States must hold inv_mass / inv_inertia;
+/// constraints their normal and tangents. (WideContacts::build computes the same for
+/// its passes.)
 void prepare_contacts(std::vector<ContactConstraint>& cs, const std::vector<BodyState>& states,
                       const SolverSettings& s, Real h, ContactSoftness& soft);
 /// Applies the accumulated (warm-start) impulses.
@@ -225,21 +229,30 @@ void dependency_level_order(const std::vector<ContactConstraint>& cs, const std:
 class WideContacts {
  public:
   static constexpr int kLanes = 8;
-  /// Packs `cs` (prepare_contacts already run) for `states`, visiting the constraints in
-  /// `order` (indices into cs, each once; the groups follow it); `dummy` is the index of
-  /// a state with zero velocities and zero inverse mass and inertia that padding lanes
-  /// point at.
+  /// Packs `cs` for `states`, visiting the constraints in `order` (indices into cs,
+  /// each once; the groups follow it); `dummy` is the index of a state with zero
+  /// velocities and zero inverse mass and inertia that padding lanes point at. Computes
+  /// what prepare_contacts computes for the scalar passes (each point's effective
+  /// masses and approach velocity, from the states' masses and velocities) lane by
+  /// lane, so `cs` needs no prepare_contacts; unpack writes the normal masses back.
   void build(const std::vector<ContactConstraint>& cs, const std::vector<int>& order,
              const std::vector<BodyState>& states, int dummy);
-  /// The passes of contact_solver.h on the packed contacts: each reads the bodies'
-  /// velocities and motion (v, w, dp, dq) from `states` and adds the velocity changes
-  /// back.
+  /// Reads the bodies' motion since the step began (dp, dq) from `states` and sets what
+  /// the passes read of it: each point's anchors turned with the bodies
+  /// (current_anchors), its separation now and its effective mass (row_mass). build()
+  /// calls it; call it again whenever the motion changes (after integrate_positions).
+  /// The motion changes only between passes, so the passes share the turned anchors
+  /// instead of each turning them (a third of a pass's arithmetic).
+  void set_motion(const std::vector<BodyState>& states);
+  /// The passes of contact_solver.h on the packed contacts, at the motion of the last
+  /// set_motion: each reads the bodies' velocities (v, w) from `states` and adds the
+  /// velocity changes back.
   void warm_start(std::vector<BodyState>& states);
   /// `reverse` visits the groups last to first (a backward Gauss-Seidel pass).
   void solve(std::vector<BodyState>& states, const ContactSoftness& soft, Real inv_h, Real push_max,
              bool use_bias, bool reverse = false);
-  /// Writes impulses, max_normal_impulse, relative_velocity and push_gap back to `cs`
-  /// (the constraints given to build).
+  /// Writes impulses, max_normal_impulse, relative_velocity, push_gap and normal_mass
+  /// back to `cs` (the constraints given to build), what apply_restitution reads.
   void unpack(std::vector<ContactConstraint>& cs) const;
   int group_count() const { return static_cast<int>(groups_.size()); }
 
@@ -257,6 +270,8 @@ class WideContacts {
     alignas(32) float mu[kLanes] = {};
     /// 1 where the lane's constraint has a body that does not move (ContactSoftness::fixed).
     alignas(32) float fixed[kLanes] = {};
+    /// The lane's point count (0 for a padding lane): points past it are padding.
+    alignas(32) float count[kLanes] = {};
     struct Point {
       alignas(32) float ra[3][kLanes] = {}, rb[3][kLanes] = {};
       /// ContactConstraintPoint::ca_n / cb_n.
@@ -267,20 +282,27 @@ class WideContacts {
       alignas(32) float normal_impulse[kLanes] = {}, tangent_impulse[2][kLanes] = {};
       alignas(32) float max_normal_impulse[kLanes] = {}, relative_velocity[kLanes] = {};
       alignas(32) float push_gap[kLanes] = {};
+      /// At the motion of the last set_motion: the anchors (m, world frame, from the
+      /// centres of mass), the separation (m) and the normal row's effective mass.
+      alignas(32) float ra_now[3][kLanes] = {}, rb_now[3][kLanes] = {};
+      alignas(32) float separation[kLanes] = {}, mass_now[kLanes] = {};
     };
     std::array<Point, 4> p{};
   };
   const std::vector<Group>& groups() const { return groups_; }
 
-  /// A body as the passes see it: velocities and the motion since the step began.
-  /// Row 0 is the padding lanes' body (at rest, never written back).
-  struct alignas(64) Row {
-    /// turn2: |dq.xyz|^2, sin^2 of half the angle the body turned since the step began
-    /// (the warm start reads it with the velocities to skip turning still bodies).
-    float v[3], w[3], turn2, pad0;
-    float dp[3], dq[4], pad1;  ///< dq as x, y, z, w
+  /// A body as the passes see it: its velocities (m/s, rad/s, world frame). Row 0 is
+  /// the padding lanes' body (at rest, never written back).
+  struct alignas(32) Row {
+    float v[3], w[3], pad[2];
   };
-  static_assert(sizeof(Row) == 64, "the passes move a row as two 32-byte halves");
+  static_assert(sizeof(Row) == 32, "the passes move a row as one 8-float register");
+  /// A body's motion since the step began, as set_motion reads it: dp (m), dq as x, y,
+  /// z, w, and turn2 = |dq.xyz|^2, sin^2 of half the angle it turned.
+  struct alignas(32) MotionRow {
+    float dp[3], dq[4], turn2;
+  };
+  static_assert(sizeof(MotionRow) == 32, "set_motion moves a row as one 8-float register");
 
  private:
   void load(const std::vector<BodyState>& states);
@@ -289,6 +311,7 @@ class WideContacts {
   std::vector<Group> groups_;
   std::vector<int> source_;      ///< per group and lane: index into cs, or -1 for padding
   std::vector<Row> rows_;        ///< the solver's bodies
+  std::vector<MotionRow> motion_;  ///< their motion, per row (set_motion)
   std::vector<Row> loaded_;      ///< rows_ as load() wrote them (for the velocity changes)
   std::vector<int> row_state_;   ///< per row: its state index (row 0: dummy)
   std::vector<int> row_moves_;   ///< per row: 1 if its body moves (receives velocity changes)

@@ -506,6 +506,8 @@ class World {
   std::vector<std::uint64_t> order_scratch_;
   std::vector<ProxyPair> pair_scratch_;
   FlatMap<CachedManifold> cache_;  ///< by manifold_key
+  /// cos(manifold_reuse_angle / 2), set before each narrowphase (collide_pair's test).
+  Real reuse_cos_half_ = 1;
   long long reused_manifolds_ = 0;
 
   std::array<StageProfile, kStageNames.size()> profile_{};
