@@ -103,7 +103,6 @@ void Broadphase::query_pairs(std::vector<ProxyPair>& out) {
   on_query_pairs(out);
 }
 
-
 // Linear scans: brute force and sweep and prune have no spatial hierarchy to descend.
 // (Sweep and prune could bisect its sorted array on the sweep axis, but the array is only
 // sorted after update(), and queries must also see moves made since.)
