@@ -91,17 +91,52 @@ def test_box_on_quad_lands_on_the_hull_ground_balanced_on_a_corner():
 
 
 @needs_assets
-@pytest.mark.xfail(strict=True, reason="issue 6, open: the cube ends up swinging on one corner, a "
-                   "pendulum with its centre of mass 0.48 m below the corner, 1.1-1.5 rad/s after 50 s: "
-                   "its energy falls, but only by about 0.1 J per 1000 steps (numerical loss; 8 J above "
-                   "rest after 100 s). A point pivot with static friction does no work, so nothing in the "
-                   "stage's physics (no damping, no rolling or torsional friction) stops it; the contact no "
-                   "longer adds energy (it gained 0.5 J/s before the rows' anchors turned with the body)")
-def test_box_on_quad_comes_to_rest():
+def test_box_on_quad_comes_to_rest_with_physx_damping():
+    # The cube hangs from its corner, a pendulum whose centre of mass is 0.48 m below the
+    # pivot. A frictional point pivot does no work, so only damping stops it: PhysX, for
+    # which the stage is authored, damps angular velocity by 0.05 1/s unless told
+    # otherwise, and the reader applies that default (load_usd's physx_defaults).
+    # Measured: the swing's peak |w| halves about every 40 s; the cube sleeps after
+    # about 13,000 steps (217 s at 60 Hz) with its centre of mass straight below the
+    # corner. 15,000 steps leave room; the body being asleep is the "rest".
     r = wmo.io.load(ASSETS / "usdPhysicsBoxOnQuad.usda")
     box = r.bodies["/World/BoxActor"]
-    r.world.step(3000)
+    assert box.angular_damping == pytest.approx(wmo.io.usd.PHYSX_ANGULAR_DAMPING)
+    assert box.linear_damping == 0.0
+    r.world.step(15000)
+    assert box.sleeping
     assert np.linalg.norm(box.angular_velocity) < 0.05
+    rot = _rot(box.orientation)
+    corners = box.position + (np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) * 0.125) @ rot.T
+    pivot = corners[np.argmin(corners[:, 2])]
+    com = box.position + rot @ np.asarray(box.center_of_mass)
+    assert abs(pivot[2]) < 0.005  # on the ground
+    assert np.sort(corners[:, 2])[1] > 0.02  # on that corner alone
+    # Balanced: the centre of mass straight below the pivot, within 2 degrees. Sleep
+    # freezes the last small swing: the pendulum's frequency is sqrt(m g L / I_pivot) =
+    # sqrt(10 * 9.81 * 0.476 / 7.17) = 2.55 rad/s, so the sleep threshold of 0.035 rad/s
+    # held for 0.5 s (near a turning point) admits an amplitude of about 1 degree
+    # (measured: 1.04).
+    d = (com - pivot) / np.linalg.norm(com - pivot)
+    assert math.degrees(math.acos(np.clip(-d[2], -1, 1))) < 2.0
+
+
+@needs_assets
+def test_box_on_quad_without_damping_swings_on():
+    # The control for the test above: without PhysX's damping nothing in the stage's
+    # physics stops the pendulum, and it is still swinging after the same 15,000 steps
+    # (its energy falls only by the integrator's slow loss), so the rest above is the
+    # damping's doing, not the solver's.
+    r = wmo.io.load(ASSETS / "usdPhysicsBoxOnQuad.usda", physx_defaults=False)
+    box = r.bodies["/World/BoxActor"]
+    assert box.angular_damping == 0.0
+    peak = 0.0
+    r.world.step(13500)
+    for _ in range(1500):
+        r.world.step()
+        peak = max(peak, float(np.linalg.norm(box.angular_velocity)))
+    assert not box.sleeping
+    assert peak > 0.5
 
 
 @needs_assets
@@ -192,6 +227,10 @@ def built(tmp_path):
     cap.AddTranslateOp().Set(Gf.Vec3d(0, 300, 50))
     _body(cap.GetPrim(), "body")
     UsdPhysics.MassAPI.Apply(cap.GetPrim()).CreateMassAttr(3.0)
+    cap.GetPrim().AddAppliedSchema("PhysxRigidBodyAPI")  # PhysX's damping (1/s), read
+    cap.GetPrim().CreateAttribute("physxRigidBody:linearDamping", Sdf.ValueTypeNames.Float).Set(0.25)
+    cap.GetPrim().CreateAttribute("physxRigidBody:angularDamping", Sdf.ValueTypeNames.Float).Set(0.5)
+    cap.GetPrim().CreateAttribute("physxRigidBody:maxLinearVelocity", Sdf.ValueTypeNames.Float).Set(10.0)
 
     UsdShade.Material.Define(stage, "/World/Looks")
     mat = UsdShade.Material.Define(stage, "/World/Looks/Rubber")
@@ -249,6 +288,13 @@ def test_hand_built_stage_field_by_field(built):
     np.testing.assert_allclose(_rot(cap.orientation) @ (0, 1, 0), (1, 0, 0), atol=1e-9)
     np.testing.assert_allclose(cap.position, (0, 3, 0.5), atol=1e-9)
     assert cap.mass == pytest.approx(3.0)
+    assert cap.linear_damping == 0.25 and cap.angular_damping == 0.5  # authored physxRigidBody:
+    assert any(w.startswith("/World/Cap") and "physxRigidBody:maxLinearVelocity" in w for w in r.warnings)
+    # Unauthored: PhysX's defaults (0, 0.05 1/s), or WMO's 0 with physx_defaults=False.
+    assert box.linear_damping == 0.0 and box.angular_damping == pytest.approx(0.05)
+    plain = wmo.io.load(built, physx_defaults=False)
+    assert plain.bodies["/World/Parent/Box"].angular_damping == 0.0
+    assert plain.bodies["/World/Cap"].angular_damping == 0.5
 
     # Material through material:binding:physics: friction, restitution, density.
     ball = r.bodies["/World/Ball"]
@@ -415,6 +461,20 @@ def test_nan_point_names_the_prim(tmp_path):
     path = _mesh_stage(tmp_path / "nan.usda", [(0, 0, 0), (1, 0, 0), (1, 1, nan), (0, 1, 1)])
     with pytest.raises(ValueError, match=r"/World/Bad.*points\[2\]"):
         wmo.io.load(path)
+
+
+@pytest.mark.parametrize("value", [-1.0, float("nan"), float("inf")])
+def test_bad_physx_damping_names_the_prim_and_value(tmp_path, value):
+    path = tmp_path / "damp.usda"
+    stage = _stage(path, mpu=1.0)
+    cube = UsdGeom.Cube.Define(stage, "/World/Damped")
+    _body(cube.GetPrim(), "body")
+    cube.GetPrim().CreateAttribute("physxRigidBody:angularDamping", Sdf.ValueTypeNames.Float).Set(value)
+    stage.GetRootLayer().Save()
+    with pytest.raises(ValueError, match=r"/World/Damped.*physxRigidBody:angularDamping.*(-1|nan|inf)"):
+        wmo.io.load(path)
+    with pytest.raises(TypeError, match="physx_defaults"):
+        wmo.io.load(path, physx_defaults="yes")
 
 
 def test_coplanar_hull_names_the_prim(tmp_path):

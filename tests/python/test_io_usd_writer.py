@@ -166,6 +166,10 @@ def test_an_edit_made_elsewhere_wins_over_the_exact_values(tmp_path):
     assert r.bodies["/World/body_2"].position.tolist() == [4.0, 7.0, 0.0]
     assert r.bodies["/World/body_2"].friction == 0.25
     assert sum("edited after WMO wrote it" in m for m in r.warnings) == r.world.body_count  # one material for all
+    # Damping comes from the physxRigidBody: attributes the writer adds, so the schema
+    # path keeps WMO's 0 instead of taking PhysX's default 0.05 1/s.
+    assert [r.world.body(k).angular_damping for k in range(w.body_count)] == \
+        [w.body(k).angular_damping for k in range(w.body_count)]
     # Edit nothing: exact again.
     wmo.save(w, tmp_path / "u.usda")
     assert wmo.io.load(tmp_path / "u.usda").warnings == []

@@ -40,6 +40,16 @@ Supported (everything else with a Physics schema becomes a warning naming the pr
   (WMO has no separate static coefficient; a different authored ``staticFriction`` is
   warned), ``restitution``, ``density``. Unauthored values are the schema's fallbacks
   (0). A body whose colliders bind different materials uses the first one (warned).
+- Damping, which UsdPhysics leaves to the simulator: PhysX, the schema's reference
+  runtime for which stages like Pixar's examples are authored, reads it from
+  ``PhysxRigidBodyAPI``'s ``physxRigidBody:linearDamping`` and ``angularDamping`` (1/s)
+  and defaults them to 0 and 0.05 1/s. A dynamic body takes its authored values and,
+  where none is authored, PhysX's defaults, so a stage behaves as its authors saw it
+  (Pixar's BoxOnQuad cube swings on its corner forever without the angular damping:
+  a frictional point pivot does no work). ``physx_defaults=False`` leaves unauthored
+  damping at WMO's 0. WMO damps as ``v *= 1 / (1 + dt c)`` per step, PhysX as ``v *=
+  1 - dt c``: the same to first order in ``dt c``. Other authored ``physxRigidBody:``
+  attributes are warned about, not used.
 - ``PhysicsFilteredPairsAPI``: ``World.set_pair_collision(a, b, False)`` for every pair
   of bodies named (targets may be bodies or colliders).
 - ``PhysicsCollisionGroup``: each group (groups sharing a ``mergeGroup`` name count as
@@ -91,7 +101,13 @@ MAX_COLLISION_GROUPS = 63
 # with "Physics" (joints, articulations, drives, limits, ...) or a vendor's "Physx" is
 # reported as a warning.
 _SUPPORTED_APIS = {"PhysicsRigidBodyAPI", "PhysicsCollisionAPI", "PhysicsMassAPI",
-                   "PhysicsMeshCollisionAPI", "PhysicsMaterialAPI", "PhysicsFilteredPairsAPI"}
+                   "PhysicsMeshCollisionAPI", "PhysicsMaterialAPI", "PhysicsFilteredPairsAPI",
+                   "PhysxRigidBodyAPI"}  # only its damping is read; other attributes are warned about
+# PhysX's defaults for PhysxRigidBodyAPI's damping (PhysxSchema; 1/s), used for dynamic
+# bodies that author none unless load_usd(physx_defaults=False).
+PHYSX_LINEAR_DAMPING = 0.0
+PHYSX_ANGULAR_DAMPING = 0.05
+_PHYSX_DAMPING_ATTRS = ("physxRigidBody:linearDamping", "physxRigidBody:angularDamping")
 _SUPPORTED_TYPES = {"PhysicsScene", "PhysicsCollisionGroup"}
 
 _Y = np.array([0.0, 1.0, 0.0])
@@ -445,14 +461,43 @@ def _gravity(stage: "Usd.Stage", up: str, mpu: float, warnings: List[str]) -> np
     return magnitude * direction
 
 
+def _damping(prim: "Usd.Prim", physx_defaults: bool, warnings: List[str]) -> Dict[str, float]:
+    """``add_body``'s ``linear_damping`` and ``angular_damping`` (1/s) for a dynamic body
+    prim: the authored ``physxRigidBody:`` values, else PhysX's defaults (or nothing,
+    WMO's 0, without ``physx_defaults``). Warns about the API's other authored attributes."""
+    out: Dict[str, float] = {}
+    defaults = (PHYSX_LINEAR_DAMPING, PHYSX_ANGULAR_DAMPING)
+    for name, key, default in zip(_PHYSX_DAMPING_ATTRS, ("linear_damping", "angular_damping"), defaults):
+        attr = prim.GetAttribute(name)
+        if attr and attr.HasAuthoredValue():
+            v = attr.Get()
+            try:
+                v = float(v)
+            except (TypeError, ValueError):
+                raise _fail(prim, f"{name} must be a number, got {v!r}") from None
+            if not (math.isfinite(v) and v >= 0):
+                raise _fail(prim, f"{name} must be a non-negative finite number (1/s), got {v!r}")
+            out[key] = v
+        elif physx_defaults:
+            out[key] = default
+    others = sorted(a.GetName() for a in prim.GetAttributes()
+                    if a.GetName().startswith("physxRigidBody:") and a.GetName() not in _PHYSX_DAMPING_ATTRS
+                    and a.HasAuthoredValue())
+    if others:
+        _warn_prim(warnings, prim, f"{', '.join(others)} not supported by WMO yet: ignored")
+    return out
+
+
 def load_usd(path: Union[str, "os.PathLike[str]"], *, meters_per_unit: Optional[float] = None,
-             flat_hulls: str = "thicken", coacd_options: Optional[Dict[str, Any]] = None,
+             flat_hulls: str = "thicken", physx_defaults: bool = True, coacd_options: Optional[Dict[str, Any]] = None,
              world: Optional["wmo.World"] = None, **world_options: Any) -> LoadResult:
     """Reads the USD stage at ``path`` (.usd, .usda, .usdc, .usdz) into a World (see the
     module docstring for what is supported and how units, axes and scales convert).
 
     ``meters_per_unit``: overrides the stage's ``metersPerUnit``. ``flat_hulls``:
     ``"thicken"`` (default) or ``"error"`` for coplanar convexHull colliders.
+    ``physx_defaults``: unauthored damping of dynamic bodies takes PhysX's defaults
+    (linear 0, angular 0.05 1/s; see the module docstring); False keeps WMO's 0.
     ``coacd_options``: overrides of :data:`wmo.io.obj.DEFAULT_COACD_OPTIONS` for
     convexDecomposition. ``world``: add the bodies to this World (its gravity is left
     alone) instead of a new one; ``world_options`` (``dt``, ``substeps``, ...) go to the new
@@ -466,6 +511,8 @@ def load_usd(path: Union[str, "os.PathLike[str]"], *, meters_per_unit: Optional[
         raise ImportError("reading USD needs Pixar's usd-core: pip install usd-core")
     if flat_hulls not in ("thicken", "error"):
         raise ValueError(f"flat_hulls must be 'thicken' or 'error', got {flat_hulls!r}")
+    if not isinstance(physx_defaults, bool):
+        raise TypeError(f"physx_defaults must be True or False, got {physx_defaults!r}")
     name = os.fspath(path)
     if not Path(name).is_file():
         raise SceneFileNotFoundError(f"{name}: no such file")
@@ -552,7 +599,7 @@ def load_usd(path: Union[str, "os.PathLike[str]"], *, meters_per_unit: Optional[
         return wmo.Compound([(sh, wmo.Pose(t, quat_from_matrix(r))) for sh, r, t in parts]), np.eye(3), np.zeros(3)
 
     def add(key: str, prim: "Usd.Prim", xf: _Xf, shape_parts, concave, kind: str, mass, density, mat,
-            lin=None, ang=None, given=None) -> Optional[wmo.Body]:
+            lin=None, ang=None, given=None, damping=None) -> Optional[wmo.Body]:
         if concave is not None:
             shape, r, t = concave
         elif shape_parts:
@@ -573,6 +620,7 @@ def load_usd(path: Union[str, "os.PathLike[str]"], *, meters_per_unit: Optional[
                 kwargs["linear_velocity"] = lin
             if ang is not None:
                 kwargs["angular_velocity"] = ang
+            kwargs.update(damping or {})
             given = given or {}
             # MassAPI values are in the body prim's frame; the shape's frame is that frame
             # turned by r and moved by t (a lone collider's own pose) and unscaled.
@@ -658,7 +706,8 @@ def load_usd(path: Union[str, "os.PathLike[str]"], *, meters_per_unit: Optional[
         for arr, label in ((lin, "velocity"), (ang, "angularVelocity")):
             if arr is not None and not np.isfinite(arr).all():
                 raise _fail(prim, f"physics:{label} is not finite")
-        b = add(key, prim, xf, parts, concave, kind, mass, density, mat, lin, ang, given)
+        damping = _damping(prim, physx_defaults, warnings) if kind == "dynamic" else None
+        b = add(key, prim, xf, parts, concave, kind, mass, density, mat, lin, ang, given, damping)
         if b is not None:
             owner[key] = b
             for c in cols:

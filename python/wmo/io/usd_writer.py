@@ -11,7 +11,8 @@ plugin, :mod:`wmo.io.usd`) needs to simulate the same scene:
   ``translate`` and ``orient`` (the exact float64 pose), ``PhysicsRigidBodyAPI`` for
   dynamic and kinematic bodies (``kinematicEnabled``, ``velocity`` in m/s,
   ``angularVelocity`` in degrees per second, as the schema says), ``PhysicsMassAPI``
-  (mass, centre of mass, principal moments and axes) for dynamic ones;
+  (mass, centre of mass, principal moments and axes) and PhysX's ``PhysxRigidBodyAPI``
+  damping (``physxRigidBody:linearDamping``, ``angularDamping``, 1/s) for dynamic ones;
 - its collider, a child prim ``geom`` with ``PhysicsCollisionAPI``: ``Cube`` (size 2,
   scaled to the box's half-extents), ``Sphere``, ``Capsule`` and ``Cylinder`` (axis Y,
   as WMO's), ``Mesh`` with ``PhysicsMeshCollisionAPI`` approximation ``convexHull``
@@ -178,6 +179,11 @@ def save_usd(world: _core.World, path: str | os.PathLike, *, steps: int = 0) -> 
             moments, axes = _principal_axes(np.asarray(body.inertia))
             mass.CreateDiagonalInertiaAttr(Gf.Vec3f(*map(float, moments)))
             mass.CreatePrincipalAxesAttr(Gf.Quatf(float(axes[3]), Gf.Vec3f(*map(float, axes[:3]))))
+            # Damping is PhysX's schema, not UsdPhysics'; written so PhysX-based readers
+            # (and wmo.io.usd, which otherwise assumes PhysX's default 0.05 1/s) see it.
+            prim.AddAppliedSchema("PhysxRigidBodyAPI")
+            for name, value in (("linearDamping", body.linear_damping), ("angularDamping", body.angular_damping)):
+                prim.CreateAttribute(f"physxRigidBody:{name}", Sdf.ValueTypeNames.Float).Set(float(value))
         shape = body.shape
         if isinstance(shape, _core.Compound):
             colliders = []
