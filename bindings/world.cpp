@@ -202,6 +202,10 @@ speculative_motion : the margin also grows by this times the distance the pair's
     fast bodies meeting head-on collide), at the cost of more contacts for fast bodies
     and, as with any speculative contact, an occasional stop at a corner the body would
     have passed within the margin. Rotation is not covered.
+speculative_motion_static : the same for pairs with a static or kinematic body only
+    (default 1: a body reaching fixed geometry gets its contact in time, so it stops or
+    bounces at the surface, not inside it, as Box2D v3 treats static geometry
+    continuously by default; the larger of the two applies).
 manifold_reuse_distance, manifold_reuse_angle : a touching pair whose relative pose
     moved less than this (m, default 1e-3) and this (rad, default 2 degrees) since its
     manifold was computed keeps that manifold, carried along with the bodies, depths
@@ -245,6 +249,7 @@ are zero-copy, writable views; see the module notes on their lifetime.
       .def(py::init([](py::object gravity, double dt, int substeps, int iterations, int relax_iterations,
                        double contact_hertz, double contact_damping_ratio, double contact_push_max,
                        double contact_static_hertz_scale, double restitution_threshold, double speculative_distance, double speculative_motion,
+                       double speculative_motion_static,
                        double manifold_reuse_distance, double manifold_reuse_angle,
                        const std::string& friction_combine,
                        const std::string& restitution_combine, bool gyroscopic, bool sleeping,
@@ -263,6 +268,7 @@ are zero-copy, writable views; see the module notes on their lifetime.
              s.solver.restitution_threshold = restitution_threshold;
              s.speculative_distance = speculative_distance;
              s.speculative_motion = speculative_motion;
+             s.speculative_motion_static = speculative_motion_static;
              s.manifold_reuse_distance = manifold_reuse_distance;
              s.manifold_reuse_angle = manifold_reuse_angle;
              s.friction_combine = combine_rule_from_string(friction_combine);
@@ -283,7 +289,8 @@ are zero-copy, writable views; see the module notes on their lifetime.
            py::arg("contact_damping_ratio") = 10.0, py::arg("contact_push_max") = 3.0,
            py::arg("contact_static_hertz_scale") = 2.0,
            py::arg("restitution_threshold") = 1.0, py::arg("speculative_distance") = 0.04,
-           py::arg("speculative_motion") = 0.0, py::arg("manifold_reuse_distance") = 1e-3,
+           py::arg("speculative_motion") = 0.0, py::arg("speculative_motion_static") = 1.0,
+           py::arg("manifold_reuse_distance") = 1e-3,
            py::arg("manifold_reuse_angle") = 2 * kPi / 180,
            py::arg("friction_combine") = "multiply", py::arg("restitution_combine") = "max",
            py::arg("gyroscopic") = false, py::arg("sleeping") = true, py::arg("sleep_linear_threshold") = 0.05,
@@ -424,6 +431,7 @@ field; the world is unchanged. Existing state views may detach (see World).
             d["restitution_threshold"] = s.solver.restitution_threshold;
             d["speculative_distance"] = s.speculative_distance;
             d["speculative_motion"] = s.speculative_motion;
+            d["speculative_motion_static"] = s.speculative_motion_static;
             d["manifold_reuse_distance"] = s.manifold_reuse_distance;
             d["manifold_reuse_angle"] = s.manifold_reuse_angle;
             d["friction_combine"] = std::string(to_string(s.friction_combine));

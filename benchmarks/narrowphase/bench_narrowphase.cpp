@@ -280,6 +280,13 @@ int main(int argc, char** argv) {
     const Method methods[] = {
         {"wmo_special", [&](Case& c) { return wmo_special_depth(p, c, out); }, special_available(p)},
         {"wmo_gjk_epa", [&](Case& c) { return wmo_generic_depth(c, out, generic); }, true},
+        {"wmo_gjk_epa_point",
+         [&](Case& c) {
+           const DistanceResult r = penetration_convex_convex(*c.cfg.a, *c.cfg.b, c.cfg.pose_a.relative(c.cfg.pose_b),
+                                                              generic.gjk, generic.epa);
+           return r.intersecting ? -r.distance : NAN;
+         },
+         true},
         {"libccd_gjk_epa",
          [&](Case& c) {
            auto r = ref::ccd_penetration_gjk(c.ca, c.cb, ccd_default);

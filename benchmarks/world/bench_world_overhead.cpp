@@ -3,7 +3,8 @@
 // 1. Free fall: 10,000 spheres (radius 0.1 m, 1 m apart on a 22 x 22 x 21 grid, so none
 //    ever touches another) fall under gravity, no ground. WMO's World::step (defaults:
 //    dt 1/60, 4 substeps) against a plain loop over arrays doing the same integration:
-//    per substep v += h g, the centre of mass moves by h v, the orientation by h w
+//    per substep v += h g, the centre of mass moves by h times the mean of the old and
+//    new v (a free body's rule in World), the orientation by h w
 //    (integrate_rotation, as the world does). The world also does everything a step
 //    does when nothing touches (broadphase proxies moved, an empty pair query, no
 //    contacts, no solver work, the sleep check), and that overhead is what the ratio
@@ -136,8 +137,9 @@ struct PlainFreeFall {
     const Real h = dt / substeps;
     for (int s = 0; s < substeps; ++s)
       for (std::size_t i = 0; i < com.size(); ++i) {
+        const Vec3 v0 = v[i];
         v[i] += h * gravity;
-        com[i] += h * v[i];
+        com[i] += (0.5 * h) * (v0 + v[i]);
         q[i] = integrate_rotation(q[i], w[i], h);
       }
   }

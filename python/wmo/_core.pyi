@@ -277,6 +277,7 @@ class World:
                  contact_push_max: float = 3.0, contact_static_hertz_scale: float = 2.0,
                  restitution_threshold: float = 1.0,
                  speculative_distance: float = 0.04, speculative_motion: float = 0.0,
+                 speculative_motion_static: float = 1.0,
                  manifold_reuse_distance: float = 1e-3, manifold_reuse_angle: float = 0.0349,
                  friction_combine: str = "multiply",
                  restitution_combine: str = "max", gyroscopic: bool = False,

@@ -61,11 +61,13 @@ def test_writing_a_view_reaches_the_next_step():
     world.linear_velocities[b.index] = (1.0, 0.0, 0.0)
     world.step()
     p = world.positions[b.index]
-    # Semi-implicit Euler over 4 substeps of h = dt/4: x += h * v after each velocity update.
+    # 4 substeps of h = dt/4, a free body: v += h g, then x += h * (mean of the
+    # substep's start and end velocities), which under gravity is the exact parabola.
     h = 1 / 240
-    v_y = -10 * h * np.arange(1, 5)
+    v_y = -10 * h * np.arange(0, 5)
     assert p[0] == pytest.approx(5.0 + 1.0 / 60, abs=1e-12)
-    assert p[1] == pytest.approx(10.0 + h * v_y.sum(), abs=1e-12)
+    assert p[1] == pytest.approx(10.0 + h * (0.5 * (v_y[:-1] + v_y[1:])).sum(), abs=1e-12)
+    assert p[1] == pytest.approx(10.0 - 10 * (1 / 60) ** 2 / 2, abs=1e-12)
     assert p[2] == pytest.approx(-3.0, abs=1e-12)
 
 

@@ -114,6 +114,7 @@ void validate_world_settings(const WorldSettings& s) {
   require_non_negative("restitution_threshold", s.solver.restitution_threshold);
   require_non_negative("speculative_distance", s.speculative_distance);
   require_non_negative("speculative_motion", s.speculative_motion);
+  require_non_negative("speculative_motion_static", s.speculative_motion_static);
   require_non_negative("aabb_margin", s.aabb_margin);
   require_non_negative("manifold_reuse_distance", s.manifold_reuse_distance);
   require_non_negative("manifold_reuse_angle", s.manifold_reuse_angle);
@@ -601,7 +602,7 @@ void World::integrate_velocities(Real h) {
 }
 
 void World::integrate_positions(Real h) {
-  for (const int i : coupled_) integrate_position(i, states_[i], body_flags_[i], h);
+  for (const int i : coupled_) integrate_position(i, states_[i], body_flags_[i], h, states_[i].v);
 }
 
 void World::integrate_velocity(int i, BodyState& s, std::uint8_t f, Real h) const {
@@ -618,11 +619,11 @@ void World::integrate_velocity(int i, BodyState& s, std::uint8_t f, Real h) cons
   }
 }
 
-void World::integrate_position(int i, BodyState& s, std::uint8_t f, Real h) {
+void World::integrate_position(int i, BodyState& s, std::uint8_t f, Real h, const Vec3& v_move) {
   if (!(f & (kComOffset | kInContact | kGyroscopic))) {
     // The common case of a body that touches nothing, has its centre of mass at its
-    // origin and no gyroscopic term: the plain semi-implicit Euler update.
-    positions_[i] += h * s.v;
+    // origin and no gyroscopic term.
+    positions_[i] += h * v_move;
     orientations_[i] = integrate_rotation(orientations_[i], s.w, h);
     return;
   }
@@ -631,7 +632,7 @@ void World::integrate_position(int i, BodyState& s, std::uint8_t f, Real h) {
   // integration).
   const bool offset = f & kComOffset;
   const Vec3& lc = masses_[i].local_com;
-  const Vec3 com = offset ? Vec3(positions_[i] + orientations_[i] * lc + h * s.v) : Vec3(positions_[i] + h * s.v);
+  const Vec3 com = offset ? Vec3(positions_[i] + orientations_[i] * lc + h * v_move) : Vec3(positions_[i] + h * v_move);
   // The rotation uses w_rot; without the gyroscopic term it is the velocity itself.
   Vec3 w_rot = s.w;
   if (f & kGyroscopic) {
@@ -877,6 +878,8 @@ void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseO
 Real World::pair_motion_margin(int a, int b) const {
   Real scale = settings_.speculative_motion;
   if ((ccd_[a] || ccd_[b]) && settings_.enable_ccd) scale = std::max(scale, Real(1));  // CCD: all of it
+  if (kinds_[a] != BodyKind::kDynamic || kinds_[b] != BodyKind::kDynamic)
+    scale = std::max(scale, settings_.speculative_motion_static);
   if (scale == 0) return 0;
   return scale * settings_.dt * (linear_velocities_[b] - linear_velocities_[a]).norm();
 }
@@ -1090,14 +1093,17 @@ void World::run_step() {
         for (int j = 0; j < block_size; ++j) {
           const int i = block_body[j];
           BodyState& st = block[j];
+          // A free body's centre of mass moves with the substep's mean velocity (see
+          // integrate_position): exact under gravity and any other constant force.
+          const Vec3 v0 = st.v;
           if (!std::isnan(block_hg[j])) {
             st.v += block_hg[j] * settings_.gravity;
-            positions_[i] += h * st.v;
+            positions_[i] += (0.5 * h) * (v0 + st.v);
             orientations_[i] = integrate_rotation(orientations_[i], st.w, h);
             continue;
           }
           if (kinds_[i] == BodyKind::kDynamic) integrate_velocity(i, st, body_flags_[i], h);
-          integrate_position(i, st, body_flags_[i], h);
+          integrate_position(i, st, body_flags_[i], h, 0.5 * (v0 + st.v));
         }
       for (int j = 0; j < block_size; ++j) {
         const int i = block_body[j];
