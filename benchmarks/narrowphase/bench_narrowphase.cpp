@@ -17,6 +17,9 @@
 //   wmo_gjk_epa     the same with use_special_routines = false: GJK, then EPA on the cores
 //                   when overlapping, then face clipping for the manifold. Default GJK/EPA
 //                   tolerances (1e-10 relative).
+//   wmo_gjk_epa_point  penetration_convex_convex: GJK, then EPA, one contact (depth,
+//                   normal, witness points) and no manifold, as libccd and FCL answer on
+//                   their GJK/EPA paths; its difference from wmo_gjk_epa is the clipping.
 //   libccd_gjk_epa  ccdGJKPenetration: GJK boolean test; when overlapping, EPA gives depth,
 //                   direction and one point. No manifold. epa_tolerance 1e-4 (libccd's
 //                   default), max_iterations 1000 (reference_adapters.h).

@@ -23,7 +23,7 @@ from collections import defaultdict
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
-METHODS = ["wmo_special", "wmo_gjk_epa", "libccd_gjk_epa", "libccd_mpr", "fcl"]
+METHODS = ["wmo_special", "wmo_gjk_epa", "wmo_gjk_epa_point", "libccd_gjk_epa", "libccd_mpr", "fcl"]
 RATIOS = [
     ("wmo_special", "libccd_gjk_epa"),
     ("wmo_special", "fcl"),
@@ -77,12 +77,12 @@ def print_tables(rows: list[dict[str, str]]) -> None:
     for pair, ms in by_pair.items():
         any_row = next(iter(ms.values()))
         print(f"\n== {pair}  ({any_row['n_overlap']} overlapping, {any_row['n_separated']} separated)")
-        print(f"  {'method':<16}{'ns/query':>10}{'median err':>12}{'max err':>12}{'wrong verdicts':>16}")
+        print(f"  {'method':<18}{'ns/query':>10}{'median err':>12}{'max err':>12}{'wrong verdicts':>16}")
         for m in METHODS:
             if m not in ms:
                 continue
             r = ms[m]
-            print(f"  {m:<16}{fmt_ns(num(r['ns_per_query'])):>10}{fmt_err(num(r['median_error'])):>12}"
+            print(f"  {m:<18}{fmt_ns(num(r['ns_per_query'])):>10}{fmt_err(num(r['median_error'])):>12}"
                   f"{fmt_err(num(r['max_error'])):>12}{r.get('n_wrong_verdict', '-'):>16}")
         parts = []
         for a, b in RATIOS:

@@ -55,20 +55,28 @@ def _entropy(values: np.ndarray) -> float:
     return float(-(p * np.log2(p)).sum())
 
 
-def residual_entropy(snaps: list[Snapshot], dt: float) -> float:
-    """Order-0 entropy (Mbit/s) of the lag-1 residuals the encoder codes, column by
-    column (1 mm, 12 bits, linear prediction from the two previous snapshots)."""
-    enc = SnapshotEncoder()
-    values = [enc._quantize(s).values for s in snaps]  # the integers the frames carry
-    residuals = []
+def _residuals(snaps: list[Snapshot], resolution: float = 1e-3, bits: int = 12) -> tuple[np.ndarray, np.ndarray]:
+    """The lag-1 residuals the encoder codes and the baseline motions they are predicted
+    with, both (frames - 2, N, 7) int64: the quantized integers the frames carry,
+    linearly predicted from the two previous snapshots, as the codec predicts."""
+    enc = SnapshotEncoder(position_resolution=resolution, orientation_bits=bits)
+    values = [enc._quantize(s).values for s in snaps]
+    residuals, motions = [], []
     for i in range(2, len(values)):
         motion = values[i - 1] - values[i - 2]
         motion[motion[:, 3] != 0, 4:] = 0  # as the codec: no motion across an index change
         motion[:, 3] = 0
         residuals.append(values[i] - (values[i - 1] + motion))
-    r = np.concatenate(residuals)
-    bits = sum(_entropy(r[:, c]) for c in range(r.shape[1]))
-    return bits * len(snaps[0].ids) / dt / 1e6
+        motions.append(motion)
+    return np.array(residuals), np.array(motions)
+
+
+def residual_entropy(snaps: list[Snapshot], dt: float) -> float:
+    """Order-0 entropy (Mbit/s) of the lag-1 residuals the encoder codes, column by
+    column (1 mm, 12 bits, linear prediction from the two previous snapshots)."""
+    r, _ = _residuals(snaps)
+    bits = sum(_entropy(r[:, :, c]) for c in range(r.shape[2]))
+    return bits * r.shape[1] / dt / 1e6
 
 
 def context_entropy(snaps: list[Snapshot], dt: float, resolution: float, bits: int) -> float:
@@ -78,16 +86,7 @@ def context_entropy(snaps: list[Snapshot], dt: float, resolution: float, bits: i
     previous frame. An optimistic floor for an ideal adaptive context coder over the
     same residuals (thousands of contexts estimated from the run itself): what better
     entropy coding alone could reach at this precision."""
-    enc = SnapshotEncoder(position_resolution=resolution, orientation_bits=bits)
-    values = np.array([enc._quantize(s).values for s in snaps])
-    res, mot = [], []
-    for i in range(2, len(values)):
-        motion = values[i - 1] - values[i - 2]
-        motion[motion[:, 3] != 0, 4:] = 0
-        motion[:, 3] = 0
-        res.append(values[i] - (values[i - 1] + motion))
-        mot.append(motion)
-    r, m = np.array(res), np.array(mot)
+    r, m = _residuals(snaps, resolution, bits)
 
     def cls(a: np.ndarray) -> np.ndarray:
         return np.minimum(np.ceil(np.log2(np.abs(a) + 1)).astype(np.int64), 15)
@@ -102,7 +101,7 @@ def context_entropy(snaps: list[Snapshot], dt: float, resolution: float, bits: i
         for k in np.unique(ctx):
             sel = ctx == k
             total += sel.mean() * _entropy(col[sel])
-    return total * values.shape[1] / dt / 1e6
+    return total * r.shape[1] / dt / 1e6
 
 
 def main(argv: list[str] | None = None) -> int:
