@@ -271,8 +271,8 @@ are zero-copy, writable views; see the module notes on their lifetime.
              s.speculative_motion_static = speculative_motion_static;
              s.manifold_reuse_distance = manifold_reuse_distance;
              s.manifold_reuse_angle = manifold_reuse_angle;
-             s.friction_combine = combine_rule_from_string(friction_combine);
-             s.restitution_combine = combine_rule_from_string(restitution_combine);
+             s.friction_combine = combine_rule_from_string(friction_combine, "friction_combine");
+             s.restitution_combine = combine_rule_from_string(restitution_combine, "restitution_combine");
              s.gyroscopic = gyroscopic;
              s.enable_sleep = sleeping;
              s.sleep_linear_threshold = sleep_linear_threshold;

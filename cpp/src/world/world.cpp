@@ -56,14 +56,14 @@ void swap_remove(V& v, int i) {
 
 }  // namespace
 
-CombineRule combine_rule_from_string(const std::string& s) {
+CombineRule combine_rule_from_string(const std::string& s, const char* field) {
   if (s == "multiply") return CombineRule::kMultiply;
   if (s == "geometric_mean") return CombineRule::kGeometricMean;
   if (s == "max") return CombineRule::kMax;
   if (s == "min") return CombineRule::kMin;
   if (s == "average") return CombineRule::kAverage;
-  throw InvalidArgument("combine rule must be one of 'multiply', 'geometric_mean', 'max', 'min', 'average', got '" +
-                        s + "'");
+  throw InvalidArgument(std::string(field) +
+                        " must be one of 'multiply', 'geometric_mean', 'max', 'min', 'average', got '" + s + "'");
 }
 
 const char* to_string(CombineRule r) {

@@ -261,7 +261,9 @@ class _SceneApi:
         return self._call("load_scene", {"name": name, "settings": settings}, wait)
 
     def set_settings(self, wait: bool = True, **settings):
-        """Changes World settings (dt, gravity, substeps, iterations, sleeping, ...)."""
+        """Changes World settings: any keyword of ``wmo.World`` (dt, gravity, substeps,
+        iterations, sleeping, speculative_motion, ...; the keys of ``World.settings``).
+        The scene's bodies are kept; their contact warm starts begin afresh."""
         return self._call("set_settings", settings, wait)
 
 

@@ -27,13 +27,20 @@ from .. import _core, scenes
 __all__ = ["EditError", "SceneModel", "OPS", "SETTINGS", "SCENE_BUILDERS", "register_file_scene", "shape_from_spec",
            "shape_to_spec"]
 
-#: World settings a client may set (load_scene, set_settings), with their types.
+#: World settings a client may set (load_scene, set_settings), with their types: every
+#: keyword of ``wmo.World`` (the keys of ``World.settings``). A value of the right type
+#: then meets the World's own checks (ranges, named in the error), and integers are also
+#: capped at 1000 (a scene is shared: one edit must not stall its thread).
 SETTINGS: dict[str, type] = {
     "gravity": list, "dt": float, "substeps": int, "iterations": int, "relax_iterations": int,
     "contact_hertz": float, "contact_damping_ratio": float, "contact_push_max": float,
     "contact_static_hertz_scale": float,
-    "restitution_threshold": float, "speculative_distance": float, "sleeping": bool,
-    "gyroscopic": bool, "ccd": bool, "threads": int,
+    "restitution_threshold": float, "speculative_distance": float, "speculative_motion": float,
+    "speculative_motion_static": float, "manifold_reuse_distance": float, "manifold_reuse_angle": float,
+    "friction_combine": str, "restitution_combine": str, "sleeping": bool,
+    "sleep_linear_threshold": float, "sleep_angular_threshold": float, "time_to_sleep": float,
+    "gyroscopic": bool, "ccd": bool, "ccd_motion_threshold": float, "ccd_penetration": float,
+    "threads": int,
 }
 
 #: Caps on edit arguments: a scene is a shared resource, and one edit must not stall the
@@ -435,9 +442,12 @@ class SceneModel:
                 if not isinstance(v, bool):
                     raise EditError("bad_args", f"{k} must be true or false, got {v!r}")
             elif t is int:
-                _int(k, v, 1, 1000)
+                _int(k, v, 0, 1000)
+            elif t is str:
+                if not isinstance(v, str):
+                    raise EditError("bad_args", f"{k} must be a string, got {v!r}")
             else:
-                _positive(k, v) if k != "restitution_threshold" else _finite(k, v)
+                _finite(k, v)
         try:  # the World's own checks (ranges, caps), on a throwaway world
             kw = dict(settings)
             if "gravity" in kw:

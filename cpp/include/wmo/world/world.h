@@ -49,7 +49,9 @@ enum class CombineRule : std::uint8_t {
   kMin = 3,
   kAverage = 4,        ///< (a + b) / 2 (PhysX's default)
 };
-CombineRule combine_rule_from_string(const std::string& s);
+/// The rule named `s` ("multiply", "geometric_mean", "max", "min", "average"); any other
+/// name raises InvalidArgument naming `field` (the setting being parsed) and the value.
+CombineRule combine_rule_from_string(const std::string& s, const char* field = "combine rule");
 const char* to_string(CombineRule r);
 Real combine(CombineRule rule, Real a, Real b);
 
