@@ -85,16 +85,24 @@ def test_a_server_hosts_a_scene_read_from_a_file(tmp_path):
     from wmo.remote.scene import SCENE_BUILDERS, register_file_scene
 
     w = wmo.scenes.mixed_pile(count=9, seed=2)
+    # Given mass data, a collision group and a group filter travel with the file.
+    given = w.add_body(wmo.Box((0.3, 0.2, 0.1)), position=(0, 9, 0), mass=3.0, center_of_mass=(0.05, 0, 0),
+                       inertia=(0.1, 0.2, 0.25), collision_group=4)
+    w.set_group_collision(4, 0, False)
     wmo.save(w, tmp_path / "pile.usda")
     name, warnings = register_file_scene(tmp_path / "pile.usda")
     try:
         assert name == f"file:{(tmp_path / 'pile.usda').resolve()}" and warnings == []
         model = SceneModel(name)
-        assert model.world.body_count == 10
+        assert model.world.body_count == 11
         assert np.array_equal(np.asarray(model.world.positions), np.asarray(w.positions))
         assert model.world.settings["gravity"].tolist() == w.settings["gravity"].tolist()
+        b = model.world.body(given.index)
+        assert b.collision_group == 4 and np.allclose(b.center_of_mass, given.center_of_mass)
+        assert np.allclose(b.inertia, given.inertia) and b.mass == 3.0
+        assert not model.world.group_collision(0, 4) and model.world.group_collision(1, 4)
         model.apply("reset", {})  # the file is the scene a reset goes back to
-        assert model.world.body_count == 10
+        assert model.world.body_count == 11 and not model.world.group_collision(0, 4)
         # A compound body cannot be hosted yet: a clear error, nothing registered.
         c = wmo.World()
         c.add_body(wmo.Compound([(wmo.Sphere(0.2), wmo.Pose((0.3, 0, 0))), (wmo.Sphere(0.2), wmo.Pose())]))

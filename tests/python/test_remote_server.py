@@ -23,7 +23,7 @@ pytest.importorskip("websockets")
 
 import wmo  # noqa: E402
 from wmo.remote import EditError, SceneModel  # noqa: E402
-from wmo.remote.scene import SETTINGS  # noqa: E402
+from wmo.remote.scene import SCENE_SETTINGS, SETTINGS  # noqa: E402
 from wmo.remote.client import RemoteError, connect, connect_async  # noqa: E402
 from wmo.remote.experiment import _free_port, _wait_port  # noqa: E402
 from wmo.remote.journal import SceneStore  # noqa: E402
@@ -102,6 +102,10 @@ def test_scene_model_ids_follow_the_worlds_swap_remove():
     ("set_settings", {"friction_combine": "bogus"}, "bad_args"),
     ("set_settings", {"restitution_combine": 2}, "bad_args"),
     ("set_settings", {"time_to_sleep": float("nan")}, "bad_args"),
+    ("set_settings", {"collision_groups_off": [[0, 64]]}, "bad_args"),
+    ("add_body", {"shape": BOX, "collision_group": 64}, "bad_args"),
+    ("add_body", {"shape": BOX, "inertia": [1, -2, 3]}, "bad_args"),
+    ("add_body", {"shape": BOX, "center_of_mass": [0, "x", 0]}, "bad_args"),
     ("fly", {}, "unknown_op"),
 ])
 def test_a_bad_edit_names_the_problem_and_leaves_the_scene_unchanged(op, args, code):
@@ -116,11 +120,34 @@ def test_a_bad_edit_names_the_problem_and_leaves_the_scene_unchanged(op, args, c
         assert next(iter(args)) in str(e.value)
 
 
+def test_given_mass_data_and_collision_groups_survive_rebuilds_resets_and_restarts():
+    # A body's given centre of mass and inertia and its collision group, and the scene's
+    # group matrix (collision_groups_off), are carried through set_settings (a new
+    # World), the scene document a restart reads, and describe(); a reset goes back to
+    # the loaded scene (no filters).
+    m = SceneModel("empty")
+    rid = m.apply("add_body", {"shape": BOX, "position": [0, 3, 0], "mass": 2.0, "center_of_mass": [0.1, 0, 0],
+                               "inertia": [1.0, 2.0, 3.0], "collision_group": 5})["id"]
+    # Group 5 does not collide with the ground's group 0: the box falls through it.
+    m.apply("set_settings", {"collision_groups_off": [[5, 0]]})
+    m.apply("set_settings", {"dt": 1 / 120})  # another rebuild
+    for model in (m, SceneModel.from_document(m.to_document())):
+        b = model.bodies[rid]
+        assert b.collision_group == 5 and b.center_of_mass.tolist() == [0.1, 0, 0]
+        assert np.allclose(np.linalg.eigvalsh(b.inertia), [1, 2, 3])
+        assert not model.world.group_collision(0, 5) and model.world.group_collision(0, 4)
+        assert model.describe()["bodies"][rid]["collision_group"] == 5
+    m.step(240)
+    assert m.bodies[rid].position[1] < -1  # through the ground (its top is at y = 0)
+    m.apply("reset", {})
+    assert m.world.group_collision(0, 5)
+
+
 def test_every_world_setting_can_be_set_remotely():
     # The remote settings are the World's keywords, all of them: a setting added to the
     # World and forgotten here fails this test. Values the old list refused (0 relax
     # passes, a zero margin) are the World's to judge.
-    assert set(SETTINGS) == set(wmo.World().settings)
+    assert set(SETTINGS) == set(wmo.World().settings) | set(SCENE_SETTINGS)
     m = SceneModel("tower")
     new = {"relax_iterations": 0, "speculative_distance": 0.0, "speculative_motion": 0.5,
            "speculative_motion_static": 0.0, "manifold_reuse_angle": 0.01, "friction_combine": "max",
@@ -192,6 +219,13 @@ def test_clients_edit_and_watch_one_scene(server):
         seq = a.set_pose(h, position=(1.25, 5, 0.5))
         b.wait_edit(a.edit_seq)
         assert h in b.bodies and b.bodies[h]["mass"] == 2.0
+        # Given mass data and a collision group travel with the edit (as numpy input too).
+        g = a.add_body(wmo.Box((0.5, 0.5, 0.5)), position=(-5, 5, 0), mass=2.0, collision_group=2,
+                       center_of_mass=np.array([0.1, 0.0, 0.0]), inertia=np.diag([0.5, 0.6, 0.7]))
+        b.wait_edit(a.edit_seq)
+        assert b.bodies[g]["collision_group"] == 2 and b.bodies[g]["center_of_mass"] == [0.1, 0, 0]
+        assert b.bodies[g]["inertia"] == np.diag([0.5, 0.6, 0.7]).tolist()
+        a.remove_body(g)
         snap = b.wait_snapshot()
         b.wait_snapshot(snap.seq)
         # Full mode is exact; compressed within its resolution (1 mm: half of it per axis).

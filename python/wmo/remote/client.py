@@ -206,12 +206,17 @@ class _SceneApi:
                  density: float | None = None, friction: float | None = None, restitution: float | None = None,
                  linear_velocity=None, angular_velocity=None, linear_damping: float | None = None,
                  angular_damping: float | None = None, gravity_scale: float | None = None,
-                 ccd: bool | None = None, wait: bool = True):
+                 ccd: bool | None = None, collision_group: int | None = None, center_of_mass=None,
+                 inertia=None, inertia_axes=None, wait: bool = True):
         """Adds a body (World.add_body's arguments); returns its id (int)."""
         args = _add_body_args(shape, position, orientation, linear_velocity, angular_velocity,
                               {"kind": kind, "mass": mass, "density": density, "friction": friction,
                                "restitution": restitution, "linear_damping": linear_damping,
-                               "angular_damping": angular_damping, "gravity_scale": gravity_scale, "ccd": ccd})
+                               "angular_damping": angular_damping, "gravity_scale": gravity_scale, "ccd": ccd,
+                               "collision_group": collision_group,
+                               "center_of_mass": _vec(center_of_mass, 3, "center_of_mass"),
+                               "inertia": None if inertia is None else np.asarray(inertia, dtype=float).tolist(),
+                               "inertia_axes": _vec(inertia_axes, 4, "inertia_axes")})
         return self._call("add_body", args, wait, lambda r: r["id"])
 
     def remove_body(self, body: int, wait: bool = True):

@@ -41,7 +41,14 @@ SETTINGS: dict[str, type] = {
     "sleep_linear_threshold": float, "sleep_angular_threshold": float, "time_to_sleep": float,
     "gyroscopic": bool, "ccd": bool, "ccd_motion_threshold": float, "ccd_penetration": float,
     "threads": int,
+    # The scene's, not a World keyword: pairs of collision groups [a, b] (0..63) whose
+    # bodies do not collide (World.set_group_collision(a, b, False)); every other pair of
+    # groups collides.
+    "collision_groups_off": list,
 }
+
+#: Settings that are not World keywords (applied by SceneModel after the World is made).
+SCENE_SETTINGS = ("collision_groups_off",)
 
 #: Caps on edit arguments: a scene is a shared resource, and one edit must not stall the
 #: simulation thread or exhaust memory.
@@ -54,6 +61,7 @@ MAX_STEPS_PER_EDIT = 1000
 BODY_FIELDS: dict[str, Any] = {
     "kind": "dynamic", "mass": None, "density": 1000.0, "friction": 0.5, "restitution": 0.0,
     "linear_damping": 0.0, "angular_damping": 0.0, "gravity_scale": 1.0, "ccd": False,
+    "collision_group": 0, "center_of_mass": None, "inertia": None, "inertia_axes": None,
 }
 
 
@@ -107,6 +115,21 @@ def _quat(name: str, value: Any) -> list[float]:
     if abs(norm - 1) > 1e-6:
         raise EditError("bad_args", f"{name} must be a unit quaternion (x, y, z, w), got {value!r} (norm {norm})")
     return q
+
+
+def _group_pairs(value: Any) -> list[list[int]]:
+    """collision_groups_off: a list of [a, b] pairs of collision groups (0..63), at most
+    one per unordered pair of groups (64 * 65 / 2)."""
+    if not isinstance(value, (list, tuple)):
+        raise EditError("bad_args", f"collision_groups_off must be a list of [a, b] pairs, got {value!r}")
+    if len(value) > 64 * 65 // 2:
+        raise EditError("limit", f"collision_groups_off has {len(value)} pairs, more than the {64 * 65 // 2} there are")
+    out = []
+    for i, pair in enumerate(value):
+        if not isinstance(pair, (list, tuple)) or len(pair) != 2:
+            raise EditError("bad_args", f"collision_groups_off[{i}] must be a pair [a, b], got {pair!r}")
+        out.append([_int(f"collision_groups_off[{i}][{j}]", g, 0, 63) for j, g in enumerate(pair)])
+    return out
 
 
 def _points(name: str, value: Any, cap: int | None, width: int = 3) -> np.ndarray:
@@ -245,10 +268,11 @@ def register_file_scene(path: "str | os.PathLike[str]") -> tuple[str, list[str]]
     """Reads a scene file (USD or OBJ, through :func:`wmo.io.load`) and makes it a scene
     a server can host, reset to and ``load_scene`` by name: ``"file:<absolute path>"``.
     Only files the server's operator registers can be loaded (a client cannot make the
-    server read a path of its choosing). Returns (name, warnings): the reader's warnings,
-    plus one per body property a remote scene does not carry (given centre of mass and
-    inertia, collision groups, filtered pairs). Raises ValueError for an unreadable file
-    or a compound body (remote scenes have no compounds yet)."""
+    server read a path of its choosing). Bodies keep their given mass data and collision
+    groups, the scene its group collision matrix (the ``collision_groups_off`` setting).
+    Returns (name, warnings): the reader's warnings, plus one if the file filters pairs
+    of bodies (remote scenes do not carry those). Raises ValueError for an unreadable
+    file or a compound body (remote scenes have no compounds yet)."""
     from .. import io
 
     p = Path(path).resolve()
@@ -265,23 +289,14 @@ def register_file_scene(path: "str | os.PathLike[str]") -> tuple[str, list[str]]
             if spec.get(k) is not None:
                 v = spec[k]
                 d[k] = np.asarray(v, dtype=float).tolist() if isinstance(v, (list, tuple, np.ndarray)) else v
-        dropped = []
-        body = result.bodies[key]
-        if body.kind == "dynamic" and any(spec.get(k) is not None for k in ("center_of_mass", "inertia")):
-            # Given mass data that is the shape's own (as wmo.io.save writes it) is not lost.
-            own = spec["shape"].mass_properties(1.0)
-            if not (np.allclose(body.center_of_mass, own.center_of_mass, rtol=1e-9, atol=1e-12)
-                    and np.allclose(body.inertia, np.asarray(own.inertia) * (body.mass / own.mass), rtol=1e-9)):
-                dropped += ["center_of_mass", "inertia"]
-        if spec.get("collision_group"):
-            dropped.append("collision_group")
-        if dropped:
-            warnings.append(f"{key}: {', '.join(dropped)} not carried by remote scenes: the shape's own used")
         bodies.append(d)
     if result.world.filtered_pairs():
         warnings.append(f"{p}: filtered pairs not carried by remote scenes: ignored")
     ws = result.world.settings
-    settings = {k: (np.asarray(ws[k]).tolist() if k == "gravity" else ws[k]) for k in SETTINGS}
+    settings = {k: (np.asarray(ws[k]).tolist() if k == "gravity" else ws[k]) for k in SETTINGS if k in ws}
+    off = [[a, b] for a in range(64) for b in range(a, 64) if not result.world.group_collision(a, b)]
+    if off:
+        settings["collision_groups_off"] = off
     name = f"file:{p}"
     SCENE_BUILDERS[name] = lambda: (dict(settings), [dict(b) for b in bodies])
     return name, warnings
@@ -307,10 +322,12 @@ class SceneModel:
     # ---- the world and the id map ----
 
     def _new_world(self, settings: dict) -> None:
-        kwargs = {k: v for k, v in settings.items()}
+        kwargs = {k: v for k, v in settings.items() if k not in SCENE_SETTINGS}
         if "gravity" in kwargs:
             kwargs["gravity"] = tuple(kwargs["gravity"])
         self.world = _core.World(**kwargs)
+        for a, b in settings.get("collision_groups_off", ()):
+            self.world.set_group_collision(a, b, False)
         self.settings = dict(settings)
         self.bodies: dict[int, _core.Body] = {}      # remote id -> world handle
         self.defs: dict[int, dict] = {}              # remote id -> definition (spec + fields)
@@ -363,6 +380,19 @@ class SceneModel:
         d["gravity_scale"] = _finite("gravity_scale", d["gravity_scale"])
         if not isinstance(d["ccd"], bool):
             raise EditError("bad_args", f"ccd must be true or false, got {d['ccd']!r}")
+        d["collision_group"] = _int("collision_group", d["collision_group"], 0, 63)
+        # Given mass data (World.add_body's center_of_mass, inertia, inertia_axes): the
+        # structure here, the values (positive definite, ...) by the World when added.
+        if d["center_of_mass"] is not None:
+            d["center_of_mass"] = _vec("center_of_mass", d["center_of_mass"])
+        if d["inertia"] is not None:
+            v = d["inertia"]
+            if isinstance(v, (list, tuple)) and len(v) == 3 and all(isinstance(r, (list, tuple)) for r in v):
+                d["inertia"] = [_vec(f"inertia[{i}]", r) for i, r in enumerate(v)]
+            else:
+                d["inertia"] = _vec("inertia", v)  # principal moments
+        if d["inertia_axes"] is not None:
+            d["inertia_axes"] = _quat("inertia_axes", d["inertia_axes"])
         return d
 
     def _add(self, d: dict, state: dict, rid: int | None = None) -> int:
@@ -436,7 +466,9 @@ class SceneModel:
             if k not in SETTINGS:
                 raise EditError("bad_args", f"unknown setting {k!r} (settable: {', '.join(SETTINGS)})")
             t = SETTINGS[k]
-            if t is list:
+            if k == "collision_groups_off":
+                _group_pairs(v)
+            elif t is list:
                 _vec(k, v)
             elif t is bool:
                 if not isinstance(v, bool):
@@ -449,7 +481,7 @@ class SceneModel:
             else:
                 _finite(k, v)
         try:  # the World's own checks (ranges, caps), on a throwaway world
-            kw = dict(settings)
+            kw = {k: v for k, v in settings.items() if k not in SCENE_SETTINGS}
             if "gravity" in kw:
                 kw["gravity"] = tuple(kw["gravity"])
             _core.World(**kw)
