@@ -103,15 +103,21 @@ def test_a_server_hosts_a_scene_read_from_a_file(tmp_path):
         assert not model.world.group_collision(0, 4) and model.world.group_collision(1, 4)
         model.apply("reset", {})  # the file is the scene a reset goes back to
         assert model.world.body_count == 11 and not model.world.group_collision(0, 4)
-        # A compound body cannot be hosted yet: a clear error, nothing registered.
+        # A compound body is hosted too: the same children, poses and mass.
         c = wmo.World()
-        c.add_body(wmo.Compound([(wmo.Sphere(0.2), wmo.Pose((0.3, 0, 0))), (wmo.Sphere(0.2), wmo.Pose())]))
+        cb = c.add_body(wmo.Compound([(wmo.Sphere(0.2), wmo.Pose((0.3, 0, 0))),
+                                      (wmo.Box((0.1, 0.2, 0.1)), wmo.Pose((0, 0.2, 0), (0, 0, 0.6, 0.8)))]),
+                        position=(0, 2, 0))
         wmo.save(c, tmp_path / "compound.usda")
-        with pytest.raises(ValueError, match="compound"):
-            register_file_scene(tmp_path / "compound.usda")
-        assert f"file:{(tmp_path / 'compound.usda').resolve()}" not in SCENE_BUILDERS
+        name_c, warnings_c = register_file_scene(tmp_path / "compound.usda")
+        model_c = SceneModel(name_c)
+        hosted = model_c.world.body(cb.index)
+        assert warnings_c == [] and hosted.shape.type == "compound" and hosted.mass == pytest.approx(cb.mass)
+        assert [(type(s).__name__, p.position.tolist()) for s, p in hosted.shape.children] == \
+            [(type(s).__name__, p.position.tolist()) for s, p in cb.shape.children]
     finally:
         SCENE_BUILDERS.pop(name, None)
+        SCENE_BUILDERS.pop(f"file:{(tmp_path / 'compound.usda').resolve()}", None)
 
 
 def test_wmo_serve_hosts_a_file_given_as_a_scene(tmp_path):

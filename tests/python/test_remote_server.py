@@ -106,6 +106,13 @@ def test_scene_model_ids_follow_the_worlds_swap_remove():
     ("add_body", {"shape": BOX, "collision_group": 64}, "bad_args"),
     ("add_body", {"shape": BOX, "inertia": [1, -2, 3]}, "bad_args"),
     ("add_body", {"shape": BOX, "center_of_mass": [0, "x", 0]}, "bad_args"),
+    ("add_body", {"shape": {"type": "compound", "children": []}}, "bad_args"),
+    ("add_body", {"shape": {"type": "compound", "children": [{"shape": {"type": "plane", "normal": [0, 1, 0]}}]}},
+     "bad_args"),
+    ("add_body", {"shape": {"type": "compound", "children": [
+        {"shape": {"type": "compound", "children": [{"shape": {"type": "sphere", "radius": 1}}]}}]}}, "bad_args"),
+    ("add_body", {"shape": {"type": "compound", "children": [{"shape": BOX, "position": [0, 1]}]}}, "bad_args"),
+    ("add_body", {"shape": {"type": "compound", "children": [{"shape": BOX}] * 257}}, "limit"),
     ("fly", {}, "unknown_op"),
 ])
 def test_a_bad_edit_names_the_problem_and_leaves_the_scene_unchanged(op, args, code):
@@ -226,6 +233,14 @@ def test_clients_edit_and_watch_one_scene(server):
         assert b.bodies[g]["collision_group"] == 2 and b.bodies[g]["center_of_mass"] == [0.1, 0, 0]
         assert b.bodies[g]["inertia"] == np.diag([0.5, 0.6, 0.7]).tolist()
         a.remove_body(g)
+        # A compound travels as its children's specs and poses.
+        shape = wmo.Compound([(wmo.Sphere(0.25), wmo.Pose((0.4, 0, 0))), (wmo.Box((0.2, 0.2, 0.2)), wmo.Pose())])
+        k = a.add_body(shape, position=(-5, 5, 0))
+        b.wait_edit(a.edit_seq)
+        spec = b.bodies[k]["shape"]
+        assert spec["type"] == "compound" and [c["shape"]["type"] for c in spec["children"]] == ["sphere", "box"]
+        assert spec["children"][0]["position"] == [0.4, 0, 0]
+        a.remove_body(k)
         snap = b.wait_snapshot()
         b.wait_snapshot(snap.seq)
         # Full mode is exact; compressed within its resolution (1 mm: half of it per axis).

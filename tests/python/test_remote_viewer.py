@@ -318,3 +318,24 @@ def test_headless_chromium_shows_the_tower(lab, tmp_path):
         proc.wait(10)
         _wait(lambda: _group_gone(proc.pid), timeout=10, what="Chromium's processes to exit")
         shutil.rmtree(profile, ignore_errors=True)
+
+
+def test_a_compound_is_drawn_as_its_children_in_place():
+    # One mesh in the body's frame: each child's mesh (unit meshes stretched by their
+    # scale) moved by its pose; the bounding radius holds every child.
+    import wmo
+    from wmo.remote.scene import shape_to_spec
+    from wmo.remote.viewer import _bounding_radius, _mesh
+
+    q = (0.0, 0.0, math.sin(math.pi / 8), math.cos(math.pi / 8))  # 45 degrees about z
+    spec = shape_to_spec(wmo.Compound([(wmo.Sphere(0.25), wmo.Pose((1.0, 0, 0))),
+                                       (wmo.Box((0.5, 0.1, 0.1)), wmo.Pose((0, 0, 0), q))]))
+    v, f, _ = _mesh(spec)
+    sphere_v = len(_mesh({"type": "sphere"})[0])
+    assert f.max() == len(v) - 1 and f.min() == 0
+    np.testing.assert_allclose(np.linalg.norm(v[:sphere_v] - [1.0, 0, 0], axis=1), 0.25, rtol=1e-12)
+    # The box's long axis turned 45 degrees: its corners reach sqrt(0.5^2 + 0.1^2) from the centre in xy.
+    box = v[sphere_v:]
+    assert np.allclose(np.abs(box[:, 2]), 0.1)
+    np.testing.assert_allclose(np.hypot(box[:, 0], box[:, 1]).max(), math.hypot(0.5, 0.1), rtol=1e-12)
+    assert _bounding_radius(spec) == pytest.approx(1.25)

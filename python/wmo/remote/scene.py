@@ -56,6 +56,9 @@ MAX_BODIES = 100_000
 MAX_HULL_POINTS = 4096
 MAX_MESH_TRIANGLES = 200_000
 MAX_STEPS_PER_EDIT = 1000
+MAX_COMPOUND_CHILDREN = 256
+#: Hull points of all the children of one compound together.
+MAX_COMPOUND_POINTS = 4 * MAX_HULL_POINTS
 
 #: Body definition fields an add_body edit may carry, with defaults (those of World.add_body).
 BODY_FIELDS: dict[str, Any] = {
@@ -166,7 +169,7 @@ def shape_from_spec(spec: Any, *, limits: bool = True) -> _core.Shape:
     t = spec["type"]
     fields = {"sphere": ("radius",), "box": ("half_extents", "rounding"), "capsule": ("radius", "half_height"),
               "cylinder": ("radius", "half_height"), "convex_hull": ("points",), "plane": ("normal", "offset"),
-              "triangle_mesh": ("vertices", "triangles")}
+              "triangle_mesh": ("vertices", "triangles"), "compound": ("children",)}
     if t not in fields:
         raise EditError("bad_args", f"shape.type must be one of {', '.join(fields)}, got {t!r}")
     _check_keys(f"shape {t}", spec, ("type",) + fields[t])
@@ -186,6 +189,8 @@ def shape_from_spec(spec: Any, *, limits: bool = True) -> _core.Shape:
             return _core.ConvexHull(_points("shape.points", spec.get("points"), MAX_HULL_POINTS if limits else None))
         if t == "plane":
             return _core.Plane(_vec("shape.normal", spec.get("normal")), _finite("shape.offset", spec.get("offset", 0.0)))
+        if t == "compound":
+            return _compound_from_spec(spec.get("children"), limits)
         vertices = _points("shape.vertices", spec.get("vertices"), 3 * MAX_MESH_TRIANGLES if limits else None)
         tris = _points("shape.triangles", spec.get("triangles"), MAX_MESH_TRIANGLES if limits else None)
         if (tris != np.round(tris)).any() or tris.min() < 0 or tris.max() >= len(vertices):
@@ -197,9 +202,38 @@ def shape_from_spec(spec: Any, *, limits: bool = True) -> _core.Shape:
         raise EditError("bad_args", f"shape {t}: {e}")
 
 
+def _compound_from_spec(children: Any, limits: bool) -> _core.Compound:
+    """A compound from its children's specs: [{"shape", "position", "orientation"}, ...],
+    convex shapes placed in the compound's frame (no nested compounds)."""
+    if not isinstance(children, (list, tuple)) or not children:
+        raise EditError("bad_args", "shape.children must be a non-empty list of {shape, position, orientation}")
+    if limits and len(children) > MAX_COMPOUND_CHILDREN:
+        raise EditError("limit", f"shape.children has {len(children)} children, more than the cap {MAX_COMPOUND_CHILDREN}")
+    parts, points = [], 0
+    for i, c in enumerate(children):
+        name = f"shape.children[{i}]"
+        if not isinstance(c, dict):
+            raise EditError("bad_args", f"{name} must be a map with shape, position, orientation, got {c!r}"[:200])
+        _check_keys(name, c, ("shape", "position", "orientation"))
+        sub = c.get("shape")
+        if isinstance(sub, dict) and sub.get("type") == "compound":
+            raise EditError("bad_args", f"{name}.shape: compounds do not nest")
+        if isinstance(sub, dict) and isinstance(sub.get("points"), (list, tuple)):
+            points += len(sub["points"])
+            if limits and points > MAX_COMPOUND_POINTS:
+                raise EditError("limit", f"shape.children hold more than {MAX_COMPOUND_POINTS} hull points")
+        try:
+            child = shape_from_spec(sub, limits=limits)
+        except EditError as e:
+            raise EditError(e.code, f"{name}: {e}") from None
+        pos = _vec(f"{name}.position", c["position"]) if c.get("position") is not None else [0.0, 0.0, 0.0]
+        q = _quat(f"{name}.orientation", c["orientation"]) if c.get("orientation") is not None else [0.0, 0.0, 0.0, 1.0]
+        parts.append((child, _core.Pose(pos, q)))
+    return _core.Compound(parts)
+
+
 def shape_to_spec(shape: _core.Shape) -> dict:
-    """The spec of a shape object (the inverse of shape_from_spec). Compounds are not
-    supported remotely yet (TypeError)."""
+    """The spec of a shape object (the inverse of shape_from_spec)."""
     t = shape.type
     if isinstance(shape, _core.Sphere):
         return {"type": "sphere", "radius": shape.radius}
@@ -218,8 +252,12 @@ def shape_to_spec(shape: _core.Shape) -> dict:
     if isinstance(shape, _core.TriangleMesh):
         return {"type": "triangle_mesh", "vertices": np.asarray(shape.vertices).tolist(),
                 "triangles": np.asarray(shape.triangles).tolist()}
+    if isinstance(shape, _core.Compound):
+        return {"type": "compound", "children": [
+            {"shape": shape_to_spec(child), "position": np.asarray(pose.position).tolist(),
+             "orientation": np.asarray(pose.orientation).tolist()} for child, pose in shape.children]}
     raise TypeError(f"a {t} shape cannot be sent to a remote scene (supported: sphere, box, capsule, "
-                    f"cylinder, convex_hull, plane, triangle_mesh)")
+                    f"cylinder, convex_hull, plane, triangle_mesh, compound)")
 
 
 def _shape_key(spec: dict) -> str:
@@ -272,7 +310,7 @@ def register_file_scene(path: "str | os.PathLike[str]") -> tuple[str, list[str]]
     groups, the scene its group collision matrix (the ``collision_groups_off`` setting).
     Returns (name, warnings): the reader's warnings, plus one if the file filters pairs
     of bodies (remote scenes do not carry those). Raises ValueError for an unreadable
-    file or a compound body (remote scenes have no compounds yet)."""
+    file or a shape a remote scene cannot hold."""
     from .. import io
 
     p = Path(path).resolve()

@@ -141,6 +141,19 @@ def _mesh(spec: dict) -> tuple[np.ndarray, np.ndarray, bool]:
         centre = n * (float(spec.get("offset", 0.0)) - 0.5 * _PLANE_THICKNESS)
         v = m.vertices @ rot[:3, :3].T + centre
         return v, m.faces, True
+    if t == "compound":
+        # The children's meshes in the compound's frame, as one mesh.
+        from .. import Pose
+
+        vs, fs, n = [], [], 0
+        for c in spec["children"]:
+            v, f, _ = _mesh(c["shape"])
+            v = np.asarray(v, dtype=float) * np.asarray(_scale(c["shape"]))
+            pose = Pose(c.get("position", (0.0, 0.0, 0.0)), c.get("orientation", (0.0, 0.0, 0.0, 1.0)))
+            vs.append(v @ pose.matrix().T + np.asarray(pose.position))
+            fs.append(np.asarray(f, dtype=np.int64) + n)
+            n += len(v)
+        return np.concatenate(vs), np.concatenate(fs), True
     raise ValueError(f"cannot draw a shape of type {t!r}")
 
 
@@ -156,6 +169,9 @@ def _bounding_radius(spec: dict) -> float:
     if t in ("convex_hull", "triangle_mesh"):
         pts = np.asarray(spec.get("points", spec.get("vertices")), dtype=float)
         return float(np.linalg.norm(pts, axis=1).max()) if len(pts) else 0.0
+    if t == "compound":
+        return max(float(np.linalg.norm(c.get("position", (0.0, 0.0, 0.0)))) + _bounding_radius(c["shape"])
+                   for c in spec["children"])
     return 0.0
 
 
