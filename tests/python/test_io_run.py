@@ -89,6 +89,7 @@ def test_a_server_hosts_a_scene_read_from_a_file(tmp_path):
     given = w.add_body(wmo.Box((0.3, 0.2, 0.1)), position=(0, 9, 0), mass=3.0, center_of_mass=(0.05, 0, 0),
                        inertia=(0.1, 0.2, 0.25), collision_group=4)
     w.set_group_collision(4, 0, False)
+    w.set_pair_collision(w.body(1), w.body(2), False)
     wmo.save(w, tmp_path / "pile.usda")
     name, warnings = register_file_scene(tmp_path / "pile.usda")
     try:
@@ -101,6 +102,7 @@ def test_a_server_hosts_a_scene_read_from_a_file(tmp_path):
         assert b.collision_group == 4 and np.allclose(b.center_of_mass, given.center_of_mass)
         assert np.allclose(b.inertia, given.inertia) and b.mass == 3.0
         assert not model.world.group_collision(0, 4) and model.world.group_collision(1, 4)
+        assert [(a.index, b.index) for a, b in model.world.filtered_pairs()] == [(1, 2)]
         model.apply("reset", {})  # the file is the scene a reset goes back to
         assert model.world.body_count == 11 and not model.world.group_collision(0, 4)
         # A compound body is hosted too: the same children, poses and mass.

@@ -103,6 +103,8 @@ def test_scene_model_ids_follow_the_worlds_swap_remove():
     ("set_settings", {"restitution_combine": 2}, "bad_args"),
     ("set_settings", {"time_to_sleep": float("nan")}, "bad_args"),
     ("set_settings", {"collision_groups_off": [[0, 64]]}, "bad_args"),
+    ("set_settings", {"collision_pairs_off": [[1, 0]]}, "bad_args"),
+    ("set_settings", {"collision_pairs_off": [[1, 1]]}, "bad_args"),
     ("add_body", {"shape": BOX, "collision_group": 64}, "bad_args"),
     ("add_body", {"shape": BOX, "inertia": [1, -2, 3]}, "bad_args"),
     ("add_body", {"shape": BOX, "center_of_mass": [0, "x", 0]}, "bad_args"),
@@ -148,6 +150,27 @@ def test_given_mass_data_and_collision_groups_survive_rebuilds_resets_and_restar
     assert m.bodies[rid].position[1] < -1  # through the ground (its top is at y = 0)
     m.apply("reset", {})
     assert m.world.group_collision(0, 5)
+
+
+def test_filtered_pairs_of_bodies_follow_grabs_restarts_and_removal():
+    # collision_pairs_off: the box no longer collides with the ground (it falls through),
+    # also after a grab and release (the body is re-created) and in the restart document;
+    # removing the box removes its pairs from the setting.
+    m = SceneModel("empty")  # the ground is body 1
+    rid = m.apply("add_body", {"shape": BOX, "position": [0, 3, 0]})["id"]
+    other = m.apply("add_body", {"shape": BOX, "position": [3, 3, 0]})["id"]
+    with pytest.raises(EditError) as e:
+        m.apply("set_settings", {"collision_pairs_off": [[1, 99]]})
+    assert e.value.code == "unknown_body"
+    m.apply("set_settings", {"collision_pairs_off": [[1, rid]]})
+    m.apply("grab", {"id": rid}, client="c")
+    m.apply("release", {"id": rid}, client="c")
+    m = SceneModel.from_document(m.to_document())
+    m.step(120)
+    assert m.bodies[rid].position[1] < -1  # through the ground
+    assert abs(m.bodies[other].position[1] - 0.5) < 0.01  # resting on it
+    m.apply("remove_body", {"id": rid})
+    assert m.settings["collision_pairs_off"] == []
 
 
 def test_every_world_setting_can_be_set_remotely():

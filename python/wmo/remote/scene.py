@@ -45,10 +45,14 @@ SETTINGS: dict[str, type] = {
     # bodies do not collide (World.set_group_collision(a, b, False)); every other pair of
     # groups collides.
     "collision_groups_off": list,
+    # Also the scene's: pairs of body ids [a, b] that do not collide
+    # (World.set_pair_collision(a, b, False)); a removed body's pairs go with it.
+    "collision_pairs_off": list,
 }
 
 #: Settings that are not World keywords (applied by SceneModel after the World is made).
-SCENE_SETTINGS = ("collision_groups_off",)
+SCENE_SETTINGS = ("collision_groups_off", "collision_pairs_off")
+MAX_PAIR_FILTERS = 100_000
 
 #: Caps on edit arguments: a scene is a shared resource, and one edit must not stall the
 #: simulation thread or exhaust memory.
@@ -132,6 +136,20 @@ def _group_pairs(value: Any) -> list[list[int]]:
         if not isinstance(pair, (list, tuple)) or len(pair) != 2:
             raise EditError("bad_args", f"collision_groups_off[{i}] must be a pair [a, b], got {pair!r}")
         out.append([_int(f"collision_groups_off[{i}][{j}]", g, 0, 63) for j, g in enumerate(pair)])
+    return out
+
+
+def _id_pairs(value: Any) -> list[list[int]]:
+    """collision_pairs_off: a list of [a, b] pairs of body ids."""
+    if not isinstance(value, (list, tuple)):
+        raise EditError("bad_args", f"collision_pairs_off must be a list of [a, b] pairs, got {value!r}"[:200])
+    if len(value) > MAX_PAIR_FILTERS:
+        raise EditError("limit", f"collision_pairs_off has {len(value)} pairs, more than the cap {MAX_PAIR_FILTERS}")
+    out = []
+    for i, pair in enumerate(value):
+        if not isinstance(pair, (list, tuple)) or len(pair) != 2:
+            raise EditError("bad_args", f"collision_pairs_off[{i}] must be a pair [a, b], got {pair!r}"[:200])
+        out.append([_int(f"collision_pairs_off[{i}][{j}]", r, 1, 2**31 - 1) for j, r in enumerate(pair)])
     return out
 
 
@@ -307,10 +325,10 @@ def register_file_scene(path: "str | os.PathLike[str]") -> tuple[str, list[str]]
     a server can host, reset to and ``load_scene`` by name: ``"file:<absolute path>"``.
     Only files the server's operator registers can be loaded (a client cannot make the
     server read a path of its choosing). Bodies keep their given mass data and collision
-    groups, the scene its group collision matrix (the ``collision_groups_off`` setting).
-    Returns (name, warnings): the reader's warnings, plus one if the file filters pairs
-    of bodies (remote scenes do not carry those). Raises ValueError for an unreadable
-    file or a shape a remote scene cannot hold."""
+    groups, the scene its group collision matrix and its filtered pairs of bodies (the
+    ``collision_groups_off`` and ``collision_pairs_off`` settings). Returns (name,
+    warnings): the reader's warnings. Raises ValueError for an unreadable file or a
+    shape a remote scene cannot hold."""
     from .. import io
 
     p = Path(path).resolve()
@@ -328,13 +346,16 @@ def register_file_scene(path: "str | os.PathLike[str]") -> tuple[str, list[str]]
                 v = spec[k]
                 d[k] = np.asarray(v, dtype=float).tolist() if isinstance(v, (list, tuple, np.ndarray)) else v
         bodies.append(d)
-    if result.world.filtered_pairs():
-        warnings.append(f"{p}: filtered pairs not carried by remote scenes: ignored")
     ws = result.world.settings
     settings = {k: (np.asarray(ws[k]).tolist() if k == "gravity" else ws[k]) for k in SETTINGS if k in ws}
     off = [[a, b] for a in range(64) for b in range(a, 64) if not result.world.group_collision(a, b)]
     if off:
         settings["collision_groups_off"] = off
+    # A loaded scene gives its bodies ids 1, 2, ... in this order.
+    rid_of = {body.index: i + 1 for i, body in enumerate(result.bodies[k] for k in result.specs)}
+    pairs = [[rid_of[a.index], rid_of[b.index]] for a, b in result.world.filtered_pairs()]
+    if pairs:
+        settings["collision_pairs_off"] = pairs
     name = f"file:{p}"
     SCENE_BUILDERS[name] = lambda: (dict(settings), [dict(b) for b in bodies])
     return name, warnings
@@ -385,6 +406,7 @@ class SceneModel:
         self.next_id = 1
         for d in bodies:
             self._add(self._normalise_def(d), d)
+        self._apply_pair_filters()
         self.base_scene, self.base_settings = scene, dict(settings)
 
     def _shape(self, spec: dict) -> _core.Shape:
@@ -454,6 +476,13 @@ class SceneModel:
         self._order = None
         return rid
 
+    def _apply_pair_filters(self) -> None:
+        """World.set_pair_collision(False) for the collision_pairs_off setting (after the
+        bodies are in the world)."""
+        for a, b in self.settings.get("collision_pairs_off", ()):
+            if a != b and a in self.bodies and b in self.bodies:
+                self.world.set_pair_collision(self.bodies[a], self.bodies[b], False)
+
     def _remove(self, rid: int) -> None:
         body = self.bodies.pop(rid)
         self.defs.pop(rid)
@@ -482,6 +511,9 @@ class SceneModel:
         d_new = dict(d, kind=kind)  # dynamic <-> kinematic only (static bodies are never grabbed)
         self._add(d_new, state, rid)
         self.defs[rid] = d_new
+        for a, b in self.settings.get("collision_pairs_off", ()):  # the new body's filters
+            if rid in (a, b) and a != b and a in self.bodies and b in self.bodies:
+                self.world.set_pair_collision(self.bodies[a], self.bodies[b], False)
         if owner is not None:
             self.owner[rid] = owner
 
@@ -506,6 +538,8 @@ class SceneModel:
             t = SETTINGS[k]
             if k == "collision_groups_off":
                 _group_pairs(v)
+            elif k == "collision_pairs_off":
+                _id_pairs(v)
             elif t is list:
                 _vec(k, v)
             elif t is bool:
@@ -557,6 +591,9 @@ class SceneModel:
         rid = self._body(args)
         self._owned_check(rid, client)
         self._remove(rid)
+        pairs = self.settings.get("collision_pairs_off")
+        if pairs:  # the body's filters go with it (its id is never reused)
+            self.settings["collision_pairs_off"] = [p for p in pairs if rid not in p]
 
     def _op_set_pose(self, args: dict, client: str) -> None:
         _check_keys("set_pose", args, ("id", "position", "orientation"))
@@ -667,6 +704,12 @@ class SceneModel:
     def _op_set_settings(self, args: dict, client: str) -> None:
         merged = {**self.settings, **args}
         self._check_settings(merged)
+        for i, (a, b) in enumerate(args.get("collision_pairs_off", ())):
+            for r in (a, b):
+                if r not in self.bodies:
+                    raise EditError("unknown_body", f"collision_pairs_off[{i}]: no body with id {r}")
+            if a == b:
+                raise EditError("bad_args", f"collision_pairs_off[{i}]: a body is not paired with itself ({a})")
         self.rebuild(merged)
 
     def rebuild(self, settings: dict) -> None:
@@ -678,6 +721,7 @@ class SceneModel:
         self.world.reserve(len(old))
         for rid, d, state in old:
             self._add(d, state, rid)
+        self._apply_pair_filters()
         self.owner = owners
 
     def step(self, n: int = 1) -> None:
@@ -744,6 +788,7 @@ class SceneModel:
         order = m.order
         for k in arr:
             getattr(m.world, k)[order] = arr[k]
+        m._apply_pair_filters()
         m.owner = {int(k): v for k, v in doc["owner"].items()}
         m.next_id = int(doc["next_id"])
         return m
