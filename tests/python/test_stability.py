@@ -201,7 +201,9 @@ def test_tower_of_30_stands_for_6000_steps_with_stiff_contacts():
 
 @pytest.mark.xfail(strict=True, reason="issue 3, open: the stiff 30-box tower never comes to rest: its "
                    "top sways: it moves 1.5 cm from step 600 to 6000 (1.2 cm before the rows' anchors "
-                   "turned with the boxes; still swaying at 16 substeps)")
+                   "turned with the boxes; still swaying at 16 substeps). Solving each manifold's normal "
+                   "rows together (an LCP per manifold, branch experiment/block-normal-relax, scalar "
+                   "solver) brings it to rest (8e-14 m)")
 def test_tower_of_30_comes_to_rest_with_stiff_contacts():
     # Still: under 2 mm of motion from step 600 to step 6000.
     w, _, p600 = _stiff_tower_after((600, 6000))
@@ -210,7 +212,10 @@ def test_tower_of_30_comes_to_rest_with_stiff_contacts():
 
 @pytest.mark.xfail(strict=True, reason="issue 3, open: at the default soft step (4 substeps, 36 Hz) a "
                    "30-box tower buckles (measured: 49 m of displacement by 6000 steps; 41 m at 30 Hz); "
-                   "stiff contacts hold it (test above), at twice the solve cost")
+                   "stiff contacts hold it (test above), at twice the solve cost. A 20-box tower falls too "
+                   "(by step 400; 15 stand). Block-solved manifolds (experiment/block-normal-relax) delay "
+                   "the fall about tenfold (30 boxes: step ~3200) but do not stop it, nor do 60-100 Hz "
+                   "springs at 4 substeps")
 def test_tower_of_30_stands_for_6000_steps_at_the_defaults():
     w = scenes.tower(30, sleeping=False)
     p0 = np.array(w.positions)
