@@ -1113,17 +1113,29 @@ void World::run_step() {
     constexpr std::uint8_t kNotPlain = kHasForce | kHasDamping | kComOffset | kGyroscopic | kInContact;
     std::array<Real, kFreeBlock> block_hg{};  // h * gravity_scale of a plain body, NaN otherwise
     auto flush_block = [&] {
+      // Local copies of what the loop reads: captured by reference, h, the gravity and
+      // the arrays' storage were reloaded after every store to a position (a double
+      // that might alias them), three times per body and substep (measured: 10,000
+      // free spheres, this loop ran 1.5x the instructions of a plain loop over arrays).
+      // The same operations on the same values, so the same bits.
+      const Real hl = h;
+      const Vec3 g = settings_.gravity;
+      const int count = block_size;
+      Vec3* const pos = positions_.data();
+      Quat* const ori = orientations_.data();
       for (int sub = 0; sub < substeps; ++sub)
-        for (int j = 0; j < block_size; ++j) {
+        for (int j = 0; j < count; ++j) {
           const int i = block_body[j];
           BodyState& st = block[j];
           // A free body's centre of mass moves with the substep's mean velocity (see
           // integrate_position): exact under gravity and any other constant force.
           const Vec3 v0 = st.v;
-          if (!std::isnan(block_hg[j])) {
-            st.v += block_hg[j] * settings_.gravity;
-            positions_[i] += (0.5 * h) * (v0 + st.v);
-            orientations_[i] = integrate_rotation(orientations_[i], st.w, h);
+          const Real hg = block_hg[j];
+          if (!std::isnan(hg)) {
+            const Vec3 v1 = v0 + hg * g;
+            st.v = v1;
+            pos[i] += (0.5 * hl) * (v0 + v1);
+            ori[i] = integrate_rotation(ori[i], st.w, hl);
             continue;
           }
           if (kinds_[i] == BodyKind::kDynamic) integrate_velocity(i, st, body_flags_[i], h);
