@@ -1,9 +1,9 @@
 """What accuracy costs in time (issue 3, section 6): each accuracy knob of the world (time
 step, substeps, velocity iterations, contact margins growing with the approach
 (speculative_motion for every pair, speculative_motion_static for pairs with fixed
-geometry), manifold reuse tolerance, contact spring stiffness) swept one at a time from
-the defaults (dt 1/60 s, 4 substeps, 1 iteration, motion margins 0 and 1, reuse 1 mm,
-36 Hz contacts) on cases with a
+geometry), manifold reuse tolerance, contact spring stiffness, block-solved manifolds)
+swept one at a time from the defaults (dt 1/60 s, 4 substeps, 1 iteration, motion margins
+0 and 1, reuse 1 mm, 36 Hz contacts, rows one by one) on cases with a
 known answer, measuring the error against the
 cost in milliseconds of wall time per simulated second; the same cases in PyBullet and
 MuJoCo (their dt and solver iterations swept, peers.py) on the same axes.
@@ -39,7 +39,8 @@ G = 10.0
 #: Wall seconds after which a sweep's remaining (dearer) settings are skipped.
 BUDGET_S = 60.0
 DEFAULT = {"dt": 1 / 60, "substeps": 4, "iterations": 1, "speculative_motion": 0.0,
-           "speculative_motion_static": 1.0, "manifold_reuse_distance": 1e-3, "contact_hertz": 36.0}
+           "speculative_motion_static": 1.0, "manifold_reuse_distance": 1e-3, "contact_hertz": 36.0,
+           "block_solver": False}
 SWEEPS = {
     "dt": [1 / 30, 1 / 60, 1 / 120, 1 / 240, 1 / 480, 1 / 960],
     "substeps": [1, 2, 4, 8, 16],
@@ -55,6 +56,8 @@ SWEEPS = {
     # one relax pass: 1.9 cm at 30 Hz, 4.3 cm at 40 Hz, 51 cm at 60 Hz; with the default
     # two, 8.1 mm at 36 Hz).
     "contact_hertz": [15.0, 30.0, 36.0, 45.0, 60.0],
+    # Each manifold's normal rows solved together (a small LCP per pair, scalar solver).
+    "block_solver": [False, True],
 }
 KNOBS = list(SWEEPS)
 

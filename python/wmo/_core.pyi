@@ -284,7 +284,7 @@ class World:
                  sleeping: bool = True, sleep_linear_threshold: float = 0.05,
                  sleep_angular_threshold: float = 0.0349, time_to_sleep: float = 0.5,
                  threads: int = 1, ccd: bool = True, ccd_motion_threshold: float = 0.5,
-                 ccd_penetration: float = 0.05) -> None: ...
+                 ccd_penetration: float = 0.05, block_solver: bool = False) -> None: ...
     def add_body(self, shape: Shape, position: npt.ArrayLike | None = None,
                  orientation: npt.ArrayLike | None = None, kind: str = "dynamic",
                  mass: float | None = None, density: float = 1000.0, friction: float = 0.5,

@@ -70,6 +70,8 @@ def main(argv: list[str] | None = None) -> int:
     b.add_argument("--contact-hertz", type=float, default=None,
                    help="WMO's contact spring in Hz (default: the World's, 36, at which the pyramid "
                         "stands to the centimetre)")
+    b.add_argument("--block-solver", action="store_true",
+                   help="WMO solves each contact pair's normal rows together (World(block_solver=True))")
     b.add_argument("--memory", action="store_true",
                    help="also measure each engine's peak memory, in a fresh process each (Linux)")
     sv = sub.add_parser("serve", help="run a server that simulates scenes for remote clients")
@@ -123,6 +125,7 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         bench.WMO_THREADS = args.threads
         bench.WMO_CONTACT_HERTZ = args.contact_hertz
+        bench.WMO_BLOCK_SOLVER = args.block_solver
         try:
             result = bench.run_bench(args.scene, steps=args.steps, engines=engines, dt=args.dt,
                                      iterations=args.iterations, substeps=args.substeps,

@@ -44,6 +44,8 @@ def test_accuracy_sweep_quick(tmp_path):
     # The contact spring is a knob too (quick: its first three values).
     hertz = {float(r["value"]) for r in rows if r["engine"] == "wmo" and r["knob"] == "contact_hertz"}
     assert hertz == {15.0, 30.0, 36.0}
+    # And the block-solved manifolds (World(block_solver=True)), off and on.
+    assert {r["value"] for r in rows if r["engine"] == "wmo" and r["knob"] == "block_solver"} == {"False", "True"}
     assert (tmp_path / "slide_accuracy.png").stat().st_size > 1000
     # The peers share the axes where installed (MuJoCo has no restitution setting, so
     # no bounce), and their sliding box stops near v^2 / (2 mu g) = 5 m too.

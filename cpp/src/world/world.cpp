@@ -1182,13 +1182,33 @@ void World::run_step() {
     flush_block();
     const ContactSoftness soft = contact_softness(settings_.solver, h);
     const bool contacts = !constraints_.empty();
-    if (contacts) {
+    if (contacts && !settings_.block_solver) {
       // The passes run on lane groups, in an order equivalent to the constraints'
       // sequence (pairs top down) that keeps the groups full.
       dependency_level_order(constraints_, states_, solve_order_, level_scratch_);
       wide_.build(constraints_, solve_order_, states_, n);
     }
-    for (int sub = 0; sub < substeps; ++sub) {
+    if (settings_.block_solver) {
+      // The scalar passes (double precision, constraints in their top-down order), the
+      // normal rows of each manifold solved together (WorldSettings::block_solver).
+      ContactSoftness scalar_soft;
+      if (contacts) prepare_contacts(constraints_, states_, settings_.solver, h, scalar_soft);
+      for (int sub = 0; sub < substeps; ++sub) {
+        integrate_velocities(h);
+        if (contacts) {
+          warm_start_contacts(constraints_, states_);
+          for (int it = 0; it < settings_.iterations; ++it)
+            solve_contacts(constraints_, states_, scalar_soft, inv_h, settings_.solver.push_max, true,
+                           NormalRows::kBlock);
+        }
+        integrate_positions(h);
+        if (contacts)
+          for (int it = 0; it < settings_.relax_iterations; ++it)  // alternating, as below
+            solve_contacts(constraints_, states_, scalar_soft, inv_h, settings_.solver.push_max, false,
+                           NormalRows::kBlock, it % 2 == 1);
+      }
+    }
+    for (int sub = 0; sub < (settings_.block_solver ? 0 : substeps); ++sub) {
       integrate_velocities(h);
       if (contacts) {
         wide_.warm_start(states_);
@@ -1202,7 +1222,7 @@ void World::run_step() {
           wide_.solve(states_, soft, inv_h, settings_.solver.push_max, false, it % 2 == 1);
       }
     }
-    if (contacts) wide_.unpack(constraints_);
+    if (contacts && !settings_.block_solver) wide_.unpack(constraints_);
   }
 
   // ---- restitution ----

@@ -33,6 +33,7 @@ __all__ = ["EditError", "SceneModel", "OPS", "SETTINGS", "SCENE_BUILDERS", "regi
 #: capped at 1000 (a scene is shared: one edit must not stall its thread).
 SETTINGS: dict[str, type] = {
     "gravity": list, "dt": float, "substeps": int, "iterations": int, "relax_iterations": int,
+    "block_solver": bool,
     "contact_hertz": float, "contact_damping_ratio": float, "contact_push_max": float,
     "contact_static_hertz_scale": float,
     "restitution_threshold": float, "speculative_distance": float, "speculative_motion": float,

@@ -182,9 +182,24 @@ void prepare_contacts(std::vector<ContactConstraint>& cs, const std::vector<Body
                       const SolverSettings& s, Real h, ContactSoftness& soft);
 /// Applies the accumulated (warm-start) impulses.
 void warm_start_contacts(std::vector<ContactConstraint>& cs, std::vector<BodyState>& states);
+/// How solve_contacts treats a constraint's normal rows (its 1 to 4 points).
+enum class NormalRows : std::uint8_t {
+  /// One row after another, each clamped on its own (projected Gauss-Seidel within the
+  /// manifold, as WideContacts' passes do).
+  kSequential,
+  /// All of a manifold's rows at once: the linear complementarity problem of its
+  /// points (solve_normal_block in contact_solver.cpp), so that one pass leaves the
+  /// manifold's normal velocities exactly at their targets (Box2D v2's block solver
+  /// for two points, here for up to four). Friction rows stay sequential.
+  kBlock,
+};
+
 /// One Gauss-Seidel pass over every contact; `use_bias` adds the soft position bias.
+/// `reverse` visits the constraints last to first (the relax passes alternate, as
+/// WideContacts::solve's `reverse`).
 void solve_contacts(std::vector<ContactConstraint>& cs, std::vector<BodyState>& states,
-                    const ContactSoftness& soft, Real inv_h, Real push_max, bool use_bias);
+                    const ContactSoftness& soft, Real inv_h, Real push_max, bool use_bias,
+                    NormalRows normal_rows = NormalRows::kSequential, bool reverse = false);
 /// Restitution pass after the substeps (Box2D v3 b2ApplyRestitution): each point that
 /// approached faster than `threshold` and pushed gets the normal velocity
 /// -restitution * v_impact, where v_impact is the approach speed at the substep it first
