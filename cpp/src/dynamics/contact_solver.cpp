@@ -2,6 +2,7 @@
 #include "wmo/dynamics/contact_solver.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 
 namespace wmo {
@@ -190,7 +191,7 @@ bool solve_normal_block(ContactConstraint& c, BodyState& a, BodyState& b, const 
   bool found = false;
   for (int size = m; size >= 1 && !found; --size) {
     for (int mask = (1 << m) - 1; mask > 0 && !found; --mask) {
-      if (__builtin_popcount(static_cast<unsigned>(mask)) != size) continue;
+      if (std::popcount(static_cast<unsigned>(mask)) != size) continue;
       int idx[kMaxPoints], k = 0;
       for (int i = 0; i < m; ++i)
         if (mask >> i & 1) idx[k++] = i;

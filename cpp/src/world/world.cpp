@@ -1182,47 +1182,42 @@ void World::run_step() {
     flush_block();
     const ContactSoftness soft = contact_softness(settings_.solver, h);
     const bool contacts = !constraints_.empty();
-    if (contacts && !settings_.block_solver) {
+    // The passes: on WideContacts' lane groups, or with block_solver on the scalar
+    // passes (double precision, the constraints in their top-down order), each
+    // manifold's normal rows solved together (WorldSettings::block_solver).
+    const bool scalar = settings_.block_solver;
+    if (contacts && scalar) {
+      ContactSoftness same_soft;  // prepare_contacts' copy of `soft`
+      prepare_contacts(constraints_, states_, settings_.solver, h, same_soft);
+    } else if (contacts) {
       // The passes run on lane groups, in an order equivalent to the constraints'
       // sequence (pairs top down) that keeps the groups full.
       dependency_level_order(constraints_, states_, solve_order_, level_scratch_);
       wide_.build(constraints_, solve_order_, states_, n);
     }
-    if (settings_.block_solver) {
-      // The scalar passes (double precision, constraints in their top-down order), the
-      // normal rows of each manifold solved together (WorldSettings::block_solver).
-      ContactSoftness scalar_soft;
-      if (contacts) prepare_contacts(constraints_, states_, settings_.solver, h, scalar_soft);
-      for (int sub = 0; sub < substeps; ++sub) {
-        integrate_velocities(h);
-        if (contacts) {
-          warm_start_contacts(constraints_, states_);
-          for (int it = 0; it < settings_.iterations; ++it)
-            solve_contacts(constraints_, states_, scalar_soft, inv_h, settings_.solver.push_max, true,
-                           NormalRows::kBlock);
-        }
-        integrate_positions(h);
-        if (contacts)
-          for (int it = 0; it < settings_.relax_iterations; ++it)  // alternating, as below
-            solve_contacts(constraints_, states_, scalar_soft, inv_h, settings_.solver.push_max, false,
-                           NormalRows::kBlock, it % 2 == 1);
-      }
-    }
-    for (int sub = 0; sub < (settings_.block_solver ? 0 : substeps); ++sub) {
+    const Real push_max = settings_.solver.push_max;
+    auto pass = [&](bool use_bias, bool reverse) {
+      if (scalar)
+        solve_contacts(constraints_, states_, soft, inv_h, push_max, use_bias, NormalRows::kBlock, reverse);
+      else
+        wide_.solve(states_, soft, inv_h, push_max, use_bias, reverse);
+    };
+    for (int sub = 0; sub < substeps; ++sub) {
       integrate_velocities(h);
       if (contacts) {
-        wide_.warm_start(states_);
-        for (int it = 0; it < settings_.iterations; ++it)
-          wide_.solve(states_, soft, inv_h, settings_.solver.push_max, true);
+        if (scalar) warm_start_contacts(constraints_, states_);
+        else wide_.warm_start(states_);
+        for (int it = 0; it < settings_.iterations; ++it) pass(true, false);
       }
       integrate_positions(h);
       if (contacts) {
-        wide_.set_motion(states_);  // the relax passes and the next substep see the new motion
-        for (int it = 0; it < settings_.relax_iterations; ++it)  // alternating: WorldSettings::relax_iterations
-          wide_.solve(states_, soft, inv_h, settings_.solver.push_max, false, it % 2 == 1);
+        // The relax passes and the next substep see the new motion (the scalar passes
+        // turn the anchors row by row).
+        if (!scalar) wide_.set_motion(states_);
+        for (int it = 0; it < settings_.relax_iterations; ++it) pass(false, it % 2 == 1);  // alternating: WorldSettings::relax_iterations
       }
     }
-    if (contacts && !settings_.block_solver) wide_.unpack(constraints_);
+    if (contacts && !scalar) wide_.unpack(constraints_);
   }
 
   // ---- restitution ----

@@ -477,11 +477,11 @@ class SceneModel:
         self._order = None
         return rid
 
-    def _apply_pair_filters(self) -> None:
+    def _apply_pair_filters(self, only: int | None = None) -> None:
         """World.set_pair_collision(False) for the collision_pairs_off setting (after the
-        bodies are in the world)."""
+        bodies are in the world); `only`: just the pairs of that body."""
         for a, b in self.settings.get("collision_pairs_off", ()):
-            if a != b and a in self.bodies and b in self.bodies:
+            if (only is None or only in (a, b)) and a != b and a in self.bodies and b in self.bodies:
                 self.world.set_pair_collision(self.bodies[a], self.bodies[b], False)
 
     def _remove(self, rid: int) -> None:
@@ -512,9 +512,7 @@ class SceneModel:
         d_new = dict(d, kind=kind)  # dynamic <-> kinematic only (static bodies are never grabbed)
         self._add(d_new, state, rid)
         self.defs[rid] = d_new
-        for a, b in self.settings.get("collision_pairs_off", ()):  # the new body's filters
-            if rid in (a, b) and a != b and a in self.bodies and b in self.bodies:
-                self.world.set_pair_collision(self.bodies[a], self.bodies[b], False)
+        self._apply_pair_filters(only=rid)  # the new body's filters
         if owner is not None:
             self.owner[rid] = owner
 
