@@ -89,5 +89,6 @@ void bind_math(py::module_& m);
 void bind_shapes(py::module_& m);
 void bind_queries(py::module_& m, py::module_& geometry);
 void bind_world(py::module_& m);
+void bind_codec(py::module_& m);
 
 }  // namespace wmo::bindings

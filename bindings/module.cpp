@@ -1,7 +1,7 @@
 // pybind11 module wmo._core. Thin: conversions and GIL handling only; every algorithm
 // lives in cpp/. Submodule bindings are registered from the other files in bindings/
 // (math.cpp: Pose; shapes.cpp: shapes; queries.cpp: result types and wmo._core.geometry;
-// world.cpp: World and Body).
+// world.cpp: World and Body; codec.cpp: wmo._core.codec).
 #include <pybind11/pybind11.h>
 
 #include "common.h"
@@ -22,4 +22,5 @@ PYBIND11_MODULE(_core, m) {
       "geometry", "Pair queries, ray casts and their batched forms (wrapped by wmo.geometry).");
   wmo::bindings::bind_queries(m, geometry);
   wmo::bindings::bind_world(m);
+  wmo::bindings::bind_codec(m);
 }

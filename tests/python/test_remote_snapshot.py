@@ -12,6 +12,8 @@ import math
 import struct
 import zlib
 
+import functools
+
 import numpy as np
 import pytest
 
@@ -86,7 +88,8 @@ def assert_fresh_arrays(snap):
     assert snap.ids.dtype == np.uint32
 
 
-def assert_within_bounds(decoded, original, resolution=1e-3, bits=12):
+def assert_within_bounds(decoded, original, resolution=1 / 512, bits=9):
+    """Decoded within the quantization bounds (the encoder defaults: 1/512 m, 9 bits)."""
     np.testing.assert_array_equal(decoded.ids, original.ids)
     error = np.abs(decoded.positions - original.positions)
     assert (error <= position_tolerance(original.positions, resolution)).all(), error.max()
@@ -282,7 +285,7 @@ def reference_decode(frame, held):
     columns instead of positions and orientations."""
     (magic, version, mode, flags, bits, distance, seq, baseline, step, _time, resolution,
      count, payload_length, wall_time) = struct.unpack_from("<2sBBBBHIIQddIId", frame, 0)
-    assert (magic, version) == (b"WS", 1)
+    assert magic == b"WS" and version in (1, 2)
     payload = zlib.decompress(frame[56:])
     assert len(payload) == payload_length
     pos = 0
@@ -317,10 +320,8 @@ def reference_decode(frame, held):
         added = int.from_bytes(payload[pos:pos + 4], "little")
         pos += 4
         ids = sorted(kept + ids_from_gaps(stream(added)))
-    columns = [stream(count) for _ in range(7 if mode == 0 else 13)]
-    assert pos == len(payload) and len(ids) == count
-
     reference = dict(zip(base["ids"], base["values"])) if base else {}
+    motions = {}
     if distance:
         basis = base["basis"]
         assert basis["seq"] == baseline - distance
@@ -334,6 +335,15 @@ def reference_decode(frame, held):
                 if now[3] == then[3]:
                     motion[4:7] = [now[c] - then[c] for c in range(4, 7)]
             reference[body] = [now[c] + (motion[c] * num) // den for c in range(7)]  # floor
+            motions[body] = motion
+
+    if flags & 4:  # RANGE_CODED: signed residuals, the index one modular
+        table = range_decode_reference(payload[pos:], [motions.get(body, [0] * 7) for body in ids])
+        columns = [[v if c == 3 else (v << 1) ^ (v >> 63) for v in table[c]] for c in range(7)]
+    else:
+        columns = [stream(count) for _ in range(7 if mode == 0 else 13)]
+        assert pos == len(payload)
+    assert len(ids) == count
 
     values = []
     for i, body in enumerate(ids):
@@ -360,7 +370,88 @@ def reference_decode(frame, held):
     return (seq, ids, np.array(positions).reshape(-1, 3), np.array(orientations).reshape(-1, 4))
 
 
-def test_frames_follow_the_documented_layout():
+def range_decode_reference(data, motion):
+    """The range-coded table of the module docstring ("Range-coded body state"),
+    decoded bit by bit in plain Python: 7 columns of len(motion) values. `motion`: one
+    list of 7 motions per row."""
+    rows, pos = len(motion), 0
+    state = {"range": 2 ** 32 - 1, "code": int.from_bytes(data[:4], "big")}
+    pos = 4
+
+    def normalize():
+        nonlocal pos
+        while state["range"] < 2 ** 24:
+            assert pos < len(data), "read past the end"
+            state["range"] = (state["range"] << 8) % 2 ** 32
+            state["code"] = ((state["code"] << 8) | data[pos]) % 2 ** 32
+            pos += 1
+
+    def bit(prob):  # prob: [p0, updates]
+        bound = (state["range"] >> 16) * prob[0]
+        if state["code"] < bound:
+            state["range"], b = bound, 0
+        else:
+            state["code"] -= bound
+            state["range"] -= bound
+            b = 1
+        shift = min(1 + prob[1], 4)
+        prob[1] = min(prob[1] + 1, 3)
+        prob[0] = prob[0] - (prob[0] >> shift) if b else prob[0] + ((65536 - prob[0]) >> shift)
+        prob[0] = min(max(prob[0], 32), 65504)
+        normalize()
+        return b
+
+    def plain(count):
+        value = 0
+        for _ in range(count):
+            state["range"] >>= 1
+            b = int(state["code"] >= state["range"])
+            if b:
+                state["code"] -= state["range"]
+            value = (value << 1) | b
+            normalize()
+        return value
+
+    def fresh():
+        return [32768, 0]
+
+    classes = {}
+    signs = {}
+    tops = {}
+    table = [[0] * rows for _ in range(7)]
+
+    def length(v):
+        return min(abs(v).bit_length(), 15)
+
+    def sign(v):
+        return 0 if v == 0 else (1 if v > 0 else 2)
+
+    for c in range(7):
+        for i in range(rows):
+            previous_column = 0 if c in (0, 4) else table[c - 1][i]
+            previous_row = table[c][i - 1] if i else 0
+            ctx = min((length(motion[i][c]) + 2 * length(previous_column) + length(previous_row) + 1) // 2, 23)
+            k = 0
+            while k < 20 and bit(classes.setdefault((c, ctx, k), fresh())):
+                k += 1
+            if k == 20:
+                k += plain(6)
+            assert k <= 62
+            if k == 0:
+                continue
+            negative = bit(signs.setdefault((c, sign(previous_column), sign(previous_row)), fresh()))
+            u = 1
+            for j in range(min(k - 1, 2)):
+                u = (u << 1) | bit(tops.setdefault((c, k, j), fresh()))
+            if k > 3:
+                u = (u << (k - 3)) | plain(k - 3)
+            table[c][i] = -u if negative else u
+    assert pos == len(data), "bytes after the table"
+    return table
+
+
+@pytest.mark.parametrize("coder", ["range", "zlib"])
+def test_frames_follow_the_documented_layout(coder):
     """Key, same-ids, predicted and id-changing frames in both modes decode the same
     with the reference decoder: exactly in full mode, to a few ulps in compressed mode
     (the float formulas may round in another order)."""
@@ -370,7 +461,7 @@ def test_frames_follow_the_documented_layout():
                      (6, np.r_[1:5, 40, 77])):
         snaps.append(moved(snaps[-1], seq, rng, ids=ids))
     for mode in ("compressed", "full"):
-        encoder, decoder, held = SnapshotEncoder(mode), SnapshotDecoder(), {}
+        encoder, decoder, held = SnapshotEncoder(mode, coder=coder), SnapshotDecoder(), {}
         distances = []
         for k, snap in enumerate(snaps):
             frame = encoder.encode(snap, k if k else None)
@@ -451,7 +542,7 @@ def test_encoder_refuses_ids_not_strictly_ascending_uint32(ids):
 
 @pytest.mark.parametrize("change, match", [
     (lambda s: s.positions.__setitem__((1, 0), np.nan), "position"),
-    (lambda s: s.positions.__setitem__((1, 0), 2e9), "position"),  # > 2**40 mm
+    (lambda s: s.positions.__setitem__((1, 0), 3e9), "position"),  # > 2**40 / 512 m
     (lambda s: s.orientations.__setitem__(1, 0.0), "orientation"),
     (lambda s: setattr(s, "positions", np.zeros((3, 2))), "positions"),
     (lambda s: setattr(s, "orientations", np.zeros((4, 4))), "orientations"),
@@ -471,17 +562,24 @@ def test_encoder_refuses_bad_snapshots(change, match):
     assert len(encoder) == 0  # nothing recorded
 
 
-def test_position_range_limit():
+@pytest.mark.parametrize("coder", ["range", "zlib"])
+def test_position_range_limit(coder):
     """|x| / resolution must stay below 2**40: at 1 mm, 1.1e9 m passes the limit."""
     inside = (MAX_POSITION_UNITS - 1) * 1e-3
     snap = Snapshot(seq=1, step=1, time=0.0, ids=np.array([1, 2], np.uint32),
                     positions=np.array([[inside, -inside, 0.0], [1e4, -1e4, 1e4]]),
                     orientations=np.tile([0.0, 0, 0, 1], (2, 1)))
-    out = SnapshotDecoder().decode(SnapshotEncoder().encode(snap, None))
-    assert_within_bounds(out, snap)
+    encoder = SnapshotEncoder(position_resolution=1e-3, coder=coder)
+    decoder = SnapshotDecoder()
+    out = decoder.decode(encoder.encode(snap, None))
+    assert_within_bounds(out, snap, resolution=1e-3)
+    # The largest residuals a delta can carry: from +inside to -inside and back.
+    flipped = Snapshot(seq=2, step=2, time=0.0, ids=snap.ids, positions=-snap.positions,
+                       orientations=snap.orientations)
+    assert_within_bounds(decoder.decode(encoder.encode(flipped, 1)), flipped, resolution=1e-3)
     snap.positions[0, 0] = MAX_POSITION_UNITS * 1e-3
     with pytest.raises(SnapshotError, match="body 1"):
-        SnapshotEncoder().encode(snap, None)
+        encoder.encode(snap, None)
 
 
 # ---- baselines and histories ----------------------------------------------------------
@@ -641,10 +739,10 @@ def test_changed_content_under_a_held_seq_is_never_a_baseline():
 
 # ---- garbage --------------------------------------------------------------------------
 
-def small_frames():
-    """A key frame and a delta frame (with ids changed), and a decoder ready for both."""
+def small_frames(coder="range"):
+    """A key frame and a delta frame (with ids changed)."""
     rng = np.random.default_rng(19)
-    encoder = SnapshotEncoder()
+    encoder = SnapshotEncoder(coder=coder)
     first = make_snapshot(rng, seq=1, n=6)
     key = encoder.encode(first, None)
     delta = encoder.encode(moved(first, 2, rng, ids=[1, 2, 4, 9]), 1)
@@ -658,8 +756,9 @@ def decoder_with_baseline(key):
 
 
 @pytest.mark.filterwarnings("error")  # no NumPy overflow warnings either
-def test_every_truncation_is_refused():
-    key, delta = small_frames()
+@pytest.mark.parametrize("coder", ["range", "zlib"])
+def test_every_truncation_is_refused(coder):
+    key, delta = small_frames(coder)
     for frame, decoder in ((key, SnapshotDecoder()), (delta, decoder_with_baseline(key))):
         held = decoder.held
         for length in range(len(frame)):
@@ -750,7 +849,8 @@ def forge(frame, **fields):
 
 @pytest.mark.parametrize("fields, match", [
     ({"magic": b"XS"}, "magic"),
-    ({"version": 2}, "version"),
+    ({"version": 3}, "version"),
+    ({"version": 1}, "flags"),  # version 1 has no RANGE_CODED flag
     ({"mode": 2}, "mode"),
     ({"flags": 0x80}, "flags"),
     ({"flags": 0x02}, "SAME_IDS"),
@@ -763,8 +863,8 @@ def forge(frame, **fields):
     ({"count": 2 ** 32 - 1}, "bodies"),
     ({"count": MAX_BODIES + 1}, "bodies"),
     # Counts that disagree with the payload: its streams no longer parse.
-    ({"count": 7}, "byte planes|truncated|after its last stream"),
-    ({"count": 5}, "byte planes|truncated|after its last stream"),
+    ({"count": 7}, "truncated|after the table"),
+    ({"count": 5}, "truncated|after the table"),
     ({"payload_length": 10 ** 6}, "payload"),  # beyond zlib's 1032:1 on this body
     ({"payload_length": 1}, "decompress"),
 ])
@@ -800,11 +900,20 @@ def test_zlib_bomb_is_refused_without_inflating_it():
 
 @pytest.mark.filterwarnings("error")
 def test_payload_inconsistencies_are_refused():
+    def with_payload(data, frame):
+        return forge(frame[:HEADER_SIZE] + zlib.compress(data), payload_length=len(data))
+
+    # The range-coded table must fill the payload exactly.
     key, delta = small_frames()
     payload = zlib.decompress(key[HEADER_SIZE:])
+    with pytest.raises(SnapshotError, match="after the table"):
+        SnapshotDecoder().decode(with_payload(payload + b"\0", key))
+    with pytest.raises(SnapshotError, match="truncated"):
+        SnapshotDecoder().decode(with_payload(payload[:-1], key))
 
-    def with_payload(data, frame=key):
-        return forge(frame[:HEADER_SIZE] + zlib.compress(data), payload_length=len(data))
+    key, delta = small_frames("zlib")
+    payload = zlib.decompress(key[HEADER_SIZE:])
+    with_payload = functools.partial(with_payload, frame=key)
 
     with pytest.raises(SnapshotError, match="after its last stream"):
         SnapshotDecoder().decode(with_payload(payload + b"\0"))
@@ -824,14 +933,14 @@ def test_payload_inconsistencies_are_refused():
     delta_payload = bytearray(zlib.decompress(delta[HEADER_SIZE:]))
     delta_payload[1:5] = struct.pack("<I", 3)  # added count (after the 1-byte mask)
     with pytest.raises(SnapshotError, match="adds"):
-        decoder.decode(with_payload(bytes(delta_payload), delta))
+        decoder.decode(with_payload(bytes(delta_payload), frame=delta))
 
 
 # ---- sizes ----------------------------------------------------------------------------
 
 def boxes3000_like(rng):
     """3008 boxes on boxes3000's grid, each offset by up to 1 cm so that positions have
-    arbitrary fractions of the 1 mm resolution, as simulated ones do."""
+    arbitrary fractions of the resolution (1/512 m), as simulated ones do."""
     from wmo.scenes import boxes3000_spec
     positions = boxes3000_spec().positions + rng.uniform(-0.01, 0.01, (N_BOXES3000, 3))
     return np.arange(1, N_BOXES3000 + 1, dtype=np.uint32), positions
@@ -854,33 +963,33 @@ def test_frame_sizes_for_3008_bodies():
 
     rest = run(lambda k: start, 3)
     print(f"\n3008 bodies: grid key frame {rest[0]} bytes, delta at rest {rest[1]} bytes")
-    assert rest[1] < 200  # measured 67: header 56 + 7 empty streams, zlib'd
+    assert rest[1] < 200  # measured 67: header 56 + a table of zeros, zlib'd
 
-    def fall(k):
+    def fall(k):  # a whole number of resolution steps per frame: 51 / 512 m
         moved_down = start.copy()
-        moved_down[:, 1] -= 0.1 * k
+        moved_down[:, 1] -= 51 / 512 * k
         return moved_down
 
     steady = run(fall, 6)
-    print(f"3008 bodies falling 0.1 m per frame: deltas {steady[1:]} bytes")
-    # Measured 89 for the first delta (every body -100 steps in y), then 59 predicted.
-    assert max(steady[1:]) < 300
+    print(f"3008 bodies falling 51/512 m per frame: deltas {steady[1:]} bytes")
+    # Measured 209 for the first delta (every body -51 steps in y), then 67 predicted.
+    assert max(steady[1:]) < 300 and max(steady[2:]) < 100
 
     def gravity(k):
         moved_down = start.copy()
         moved_down[:, 1] -= 5.0 * (k / 60) ** 2  # free fall at 10 m/s^2 from rest
         return moved_down
 
+    largest = {}
     for predict in (True, False):
         falling = run(gravity, 30, predict)
+        largest[predict] = max(falling[1:])
         print(f"3008 bodies in free fall, predict={predict}: deltas {min(falling[1:])}.."
               f"{max(falling[1:])} bytes")
-        # Measured 702..952 with prediction, 401..764 without: deltas differ by one step
-        # between bodies (how each rounds), and the predicted residual is the second
-        # difference of three roundings, so it spreads over 3 values instead of 2. On
-        # the simulated boxes3000 prediction still wins overall (bodies at different
-        # velocities in its collapse).
-        assert max(falling[1:]) < 1500
+    # Measured 357..634 bytes with prediction, 154..1607 without: without, the residual
+    # is the whole motion since the baseline, which grows with the speed; with it, the
+    # second difference of three roundings plus g dt^2 (1.4 steps), whatever the speed.
+    assert largest[True] < 1000 and largest[False] > largest[True]
 
     positions = rng.uniform(-20, 20, (N_BOXES3000, 3))
     q = unit_quaternions(rng, N_BOXES3000)
@@ -891,7 +1000,7 @@ def test_frame_sizes_for_3008_bodies():
     full_key = SnapshotEncoder("full").encode(snap, None)
     print(f"3008 bodies at random poses: key frame {len(key)} bytes compressed, "
           f"{len(full_key)} bytes full")
-    # 3 x 15.3 bits of position (40 m at 1 mm) + 2 + 3 x 12 bits of orientation = 10.5
-    # bytes a body of entropy: measured 35,198 bytes (11.7 a body).
-    assert len(key) < 40_000
+    # 3 x 14.3 bits of position (40 m at 1/512 m) + 2 + 3 x 9 bits of orientation = 9.0
+    # bytes a body of entropy: measured 27,909 bytes (9.3 a body, 3 % above).
+    assert len(key) < 29_000
     assert len(full_key) < N_BOXES3000 * 13 * 8 + 1000  # random doubles barely compress

@@ -91,7 +91,9 @@ def test_the_batches_hold_every_body_at_its_snapshot_pose(lab):
         _assert_drawn_matches(viewer, snap)
         assert viewer.drawn_poses()[rid][2] == "kinematic"
         batch = next(b for b in viewer._batches.values() if b.key == ("box", "kinematic"))
-        np.testing.assert_allclose(batch.handle.batched_wxyzs[0], [q[3], q[0], q[1], q[2]], atol=1e-3)
+        drawn_q = snap.orientations[int(np.searchsorted(snap.ids, rid))]  # q as decoded (9 bits)
+        np.testing.assert_allclose(drawn_q, q, atol=5e-3)
+        np.testing.assert_allclose(batch.handle.batched_wxyzs[0], [drawn_q[3], *drawn_q[:3]], atol=1e-6)
     finally:
         other.close()
 
