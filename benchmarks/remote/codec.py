@@ -5,11 +5,13 @@ at 60 Hz averages under 2 Mbit/s with compression" is about), then encodes every
 with wmo.remote.snapshot's encoder as a client with a perfect link would receive it:
 delta-coded against the snapshot `lag` steps back (lag 1: acknowledged at once; a real
 client's lag is its round trip in frames). For each position resolution, orientation
-bits, zlib level and lag: the average Mbit/s over the run. Also the order-0 entropy of
-the lag-1 residuals (what an ideal per-value coder without context would need), an
-optimistic context-model floor (what any entropy coder over these residuals could
-reach, see context_entropy), and how many boxes still move at the end (the scene is
-chaotic for all of its 10 s).
+bits, body-state coder ("range": the context-modelled range coder, the default;
+"zlib": byte planes left to zlib), zlib level and lag: the average Mbit/s over the run.
+Also the order-0 entropy of the lag-1 residuals (what an ideal per-value coder without
+context would need), their conditional entropy given three contexts (context_entropy:
+a reference point, not a bound; the range coder, which also conditions on the
+previous body, comes in below it), and how many boxes still move at the end (the
+scene is chaotic for all of its 10 s).
 
     .venv/bin/python benchmarks/remote/codec.py --out results/codec   [--steps 600]
 
@@ -26,8 +28,10 @@ import numpy as np
 import wmo
 from wmo.remote.snapshot import Snapshot, SnapshotEncoder, orientation_error_bound
 
-SETTINGS = [  # (position resolution m, orientation bits, zlib level)
-    (1e-3, 12, 6), (1e-3, 12, 1), (1e-3, 12, 9), (1e-3, 10, 6), (2e-3, 10, 6), (1 / 512, 9, 6),
+SETTINGS = [  # (position resolution m, orientation bits, coder, zlib level)
+    (1 / 512, 9, "range", 6), (1 / 512, 9, "zlib", 6),  # the default precision (Fiedler's)
+    (1 / 512, 10, "range", 6), (1e-3, 10, "range", 6), (1e-3, 10, "zlib", 6),
+    (1e-3, 12, "range", 6), (1e-3, 12, "zlib", 6), (1e-3, 12, "zlib", 1), (1e-3, 12, "zlib", 9),
 ]
 LAGS = (1, 2, 4)
 
@@ -43,8 +47,9 @@ def record(steps: int) -> tuple[list[Snapshot], wmo.World]:
     return snaps, world
 
 
-def mbit_per_s(snaps: list[Snapshot], resolution: float, bits: int, level: int, lag: int, dt: float) -> float:
-    enc = SnapshotEncoder(position_resolution=resolution, orientation_bits=bits, level=level)
+def mbit_per_s(snaps: list[Snapshot], resolution: float, bits: int, coder: str, level: int, lag: int,
+               dt: float) -> float:
+    enc = SnapshotEncoder(position_resolution=resolution, orientation_bits=bits, coder=coder, level=level)
     total = sum(len(enc.encode(s, snaps[i - lag].seq if i >= lag else None)) for i, s in enumerate(snaps))
     return total * 8 / (len(snaps) * dt) / 1e6
 
@@ -83,9 +88,9 @@ def context_entropy(snaps: list[Snapshot], dt: float, resolution: float, bits: i
     """Conditional entropy (Mbit/s) of the lag-1 residuals given what both ends know:
     per column, the class (bit length) of the body's own baseline motion in that
     column, of its residual in the previous column, and of its residual in the
-    previous frame. An optimistic floor for an ideal adaptive context coder over the
-    same residuals (thousands of contexts estimated from the run itself): what better
-    entropy coding alone could reach at this precision."""
+    previous frame, with thousands of contexts estimated from the run itself. What an
+    ideal coder with exactly these contexts would need; a coder with other contexts
+    can do better (the range coder conditions on the previous body too)."""
     r, m = _residuals(snaps, resolution, bits)
 
     def cls(a: np.ndarray) -> np.ndarray:
@@ -115,23 +120,24 @@ def main(argv: list[str] | None = None) -> int:
     print(f"boxes3000, {args.steps} steps: at the end {int((speed > 0.5).sum())} boxes move faster than 0.5 m/s, "
           f"{int((speed > 3).sum())} faster than 3 m/s")
     rows = []
-    for resolution, bits, level in SETTINGS:
+    for resolution, bits, coder, level in SETTINGS:
         for lag in LAGS:
-            rate = mbit_per_s(snaps, resolution, bits, level, lag, dt)
+            rate = mbit_per_s(snaps, resolution, bits, coder, level, lag, dt)
             rows.append({"position_resolution_m": resolution, "orientation_bits": bits,
                          "orientation_error_deg": float(np.degrees(orientation_error_bound(bits))),
-                         "zlib_level": level, "lag_frames": lag, "mbit_per_s": rate})
-            print(f"resolution {resolution * 1e3:.2f} mm, {bits:2d} bits, zlib {level}, lag {lag}: {rate:.3f} Mbit/s")
+                         "coder": coder, "zlib_level": level, "lag_frames": lag, "mbit_per_s": rate})
+            print(f"resolution {resolution * 1e3:.2f} mm, {bits:2d} bits, {coder:5s} (zlib {level}), "
+                  f"lag {lag}: {rate:.3f} Mbit/s")
     entropy = residual_entropy(snaps, dt)
     print(f"order-0 entropy of the lag-1 residuals (1 mm, 12 bits): {entropy:.3f} Mbit/s")
     rows.append({"position_resolution_m": 1e-3, "orientation_bits": 12, "orientation_error_deg": "",
-                 "zlib_level": "entropy", "lag_frames": 1, "mbit_per_s": entropy})
+                 "coder": "order-0 entropy", "zlib_level": "", "lag_frames": 1, "mbit_per_s": entropy})
     for resolution, bits in ((1e-3, 12), (1 / 512, 9)):
         floor = context_entropy(snaps, dt, resolution, bits)
-        print(f"context-model floor of the lag-1 residuals ({resolution * 1e3:.2f} mm, {bits} bits): "
+        print(f"conditional entropy of the lag-1 residuals ({resolution * 1e3:.2f} mm, {bits} bits): "
               f"{floor:.3f} Mbit/s")
         rows.append({"position_resolution_m": resolution, "orientation_bits": bits, "orientation_error_deg": "",
-                     "zlib_level": "context_entropy", "lag_frames": 1, "mbit_per_s": floor})
+                     "coder": "context entropy", "zlib_level": "", "lag_frames": 1, "mbit_per_s": floor})
     args.out.mkdir(parents=True, exist_ok=True)
     with open(args.out / "codec.csv", "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=list(rows[0]))

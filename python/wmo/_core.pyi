@@ -359,3 +359,8 @@ class World:
 
 # The query functions; typed in wmo/geometry.py, which wraps them.
 geometry: types.ModuleType
+# The residual table coder of the remote snapshot stream (wmo/remote/snapshot.py):
+# encode_residuals(residuals, motion=None, group_starts=1) -> bytes and
+# decode_residuals(data, rows, columns, motion=None, group_starts=1) -> (rows, columns)
+# int64; see their docstrings.
+codec: types.ModuleType

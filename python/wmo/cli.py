@@ -88,6 +88,10 @@ def main(argv: list[str] | None = None) -> int:
                     help="host scene NAME, started as BASE (empty, boxes3000, pyramid, tower, or a "
                          ".usda/.usdc/.usd/.obj scene file); repeatable; default: default=empty")
     sv.add_argument("--checkpoint-interval", type=float, default=30.0, help="seconds between checkpoints")
+    sv.add_argument("--position-resolution", type=float, default=1 / 512, metavar="M",
+                    help="compressed snapshots: position step in m (default 1/512)")
+    sv.add_argument("--orientation-bits", type=int, default=9, metavar="B",
+                    help="compressed snapshots: bits per smallest-three quaternion component, 6..16 (default 9)")
     r = sub.add_parser("run", help="simulate a USD or OBJ scene file and write the result")
     r.add_argument("scene_file", type=Path)
     when = r.add_mutually_exclusive_group()
@@ -173,7 +177,8 @@ def _serve(args) -> int:
             return 2
     try:
         server = Server(args.host, args.port, token=token, data_dir=None if args.no_persist else args.data,
-                        scenes=scenes or None, rate=args.rate, checkpoint_interval=args.checkpoint_interval)
+                        scenes=scenes or None, rate=args.rate, checkpoint_interval=args.checkpoint_interval,
+                        position_resolution=args.position_resolution, orientation_bits=args.orientation_bits)
     except ValueError as e:
         print(f"wmo serve: {e}", file=sys.stderr)
         return 2

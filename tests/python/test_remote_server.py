@@ -698,3 +698,28 @@ def test_a_client_that_does_not_acknowledge_gets_at_most_the_window(tmp_path):
         ws.close()
     finally:
         srv.stop()
+
+
+def test_snapshot_precision_is_a_server_setting():
+    """Compressed snapshots come at the server's precision (default Fiedler's 1/512 m
+    and 9 bits): decoded positions are whole multiples of the step, within half a step
+    of the truth; a bad precision is refused naming the field."""
+    where = np.array([0.1234567, 5.0, -2.7654321])
+    for kwargs, resolution in (({}, 1 / 512), ({"position_resolution": 1e-3, "orientation_bits": 12}, 1e-3)):
+        srv = Server(port=0, scenes={"lab": "empty"}, **kwargs).start()
+        try:
+            with connect(srv.url, scene="lab") as c:
+                c.add_body(wmo.Sphere(0.5), position=where, kind="static")
+                snap = c.wait_snapshot()
+                while len(snap.ids) < 2:
+                    snap = c.wait_snapshot()
+                steps = snap.positions[1] / resolution
+                np.testing.assert_allclose(steps, np.rint(steps), rtol=0, atol=1e-9)
+                np.testing.assert_allclose(snap.positions[1], where, rtol=0, atol=resolution / 2 + 1e-12)
+                assert np.abs(snap.positions[1] - where).max() > 1e-4  # truly quantized at this step
+        finally:
+            srv.stop()
+    with pytest.raises(ValueError, match="orientation_bits"):
+        Server(port=0, orientation_bits=20)
+    with pytest.raises(ValueError, match="position_resolution"):
+        Server(port=0, position_resolution=0.0)

@@ -106,7 +106,7 @@ class _Mirror:
     def __init__(self):
         # Bounded like the server's scenes, so a forged frame cannot claim more.
         self.decoder = SnapshotDecoder(max_bodies=MAX_BODIES)
-        #: Called as on_snapshot(snapshot, frame_bytes, receipt_time) for every snapshot
+        #: Called as on_snapshot(snapshot, frame_size, receipt_time) for every snapshot
         #: decoded, on the thread that receives it (experiments record with it).
         self.on_snapshot = None
         self.ids_ = itertools.count(1)
@@ -336,7 +336,8 @@ class _StateViews:
         return self._m.bytes_received
 
     def on_snapshot(self, callback) -> None:
-        """Calls callback(snapshot, frame_bytes, receipt_time) for every snapshot from now on,
+        """Calls callback(snapshot, frame_size, receipt_time) (frame_size: the frame's length in
+        bytes) for every snapshot from now on,
         on the receiving thread (None to stop): every one, also those that a newer one
         replaces before `wait_snapshot` sees them."""
         self._m.on_snapshot = callback

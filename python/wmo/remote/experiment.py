@@ -156,10 +156,11 @@ def _measure(url: str, run: Run, seconds: float, scene: str) -> None:
 def run_latency_experiment(out: Path, delays_ms=(0, 20, 40, 100), seconds: float = 10.0, scene_base: str = "boxes3000",
                            presets: tuple[str, ...] = (), weak: bool = False, mode: str = "compressed",
                            clients: int = 1, rate: float = 60.0, warmup: float = 2.0,
-                           view_port: int | None = None) -> list[Run]:
+                           view_port: int | None = None, precision: tuple[float, int] | None = None) -> list[Run]:
     """Runs the experiment; writes CSVs and plots to `out`; returns the runs. With
     `view_port`, a browser view of the scene (wmo.remote.viewer, its own process) serves
-    http://127.0.0.1:view_port while it runs."""
+    http://127.0.0.1:view_port while it runs. `precision`: (position resolution m,
+    orientation bits) of compressed snapshots; None for the server's defaults."""
     from .proxy import PRESETS
 
     out.mkdir(parents=True, exist_ok=True)
@@ -168,8 +169,10 @@ def run_latency_experiment(out: Path, delays_ms=(0, 20, 40, 100), seconds: float
     settings += [(p, PRESETS[p]) for p in presets]
     with tempfile.TemporaryDirectory() as tmp:
         sport = _free_port()
+        extra = [] if precision is None else ["--position-resolution", repr(float(precision[0])),
+                                              "--orientation-bits", str(int(precision[1]))]
         server = _spawn(["-m", "wmo", "serve", "--port", str(sport), "--no-persist", "--rate", str(rate),
-                         "--scene", f"exp={scene_base}"], weak=weak)
+                         "--scene", f"exp={scene_base}", *extra], weak=weak)
         viewer = None
         try:
             _wait_port(sport, server)
@@ -288,6 +291,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scene", default="boxes3000", help="empty, boxes3000, pyramid or tower")
     ap.add_argument("--view", type=int, default=None, metavar="PORT",
                     help="also serve a browser view of the scene on this port (viser)")
+    ap.add_argument("--position-resolution", type=float, default=None, metavar="M",
+                    help="compressed snapshots: position step in m (default: the server's, 1/512)")
+    ap.add_argument("--orientation-bits", type=int, default=None, metavar="B",
+                    help="compressed snapshots: bits per quaternion component (default: the server's, 9)")
     args = ap.parse_args(argv)
     try:
         delays = [float(x) for x in args.delays.split(",") if x]
@@ -304,7 +311,17 @@ def main(argv: list[str] | None = None) -> int:
     if bad:
         print(f"wmo experiment latency: unknown preset {bad[0]!r} (known: {', '.join(PRESETS)})", file=sys.stderr)
         return 2
+    precision = None
+    if args.position_resolution is not None or args.orientation_bits is not None:
+        precision = (1 / 512 if args.position_resolution is None else args.position_resolution,
+                     9 if args.orientation_bits is None else args.orientation_bits)
+        from .snapshot import SnapshotEncoder
+        try:
+            SnapshotEncoder(position_resolution=precision[0], orientation_bits=precision[1])
+        except ValueError as e:
+            print(f"wmo experiment latency: {e}", file=sys.stderr)
+            return 2
     run_latency_experiment(args.out, delays, args.seconds, args.scene, presets, args.weak, args.mode, args.clients,
-                           view_port=args.view)
+                           view_port=args.view, precision=precision)
     print(f"wrote {args.out / 'latency.csv'}, {args.out / 'latency_summary.csv'}, {args.out / 'latency.png'}")
     return 0
