@@ -321,7 +321,7 @@ def reference_decode(frame, held):
         pos += 4
         ids = sorted(kept + ids_from_gaps(stream(added)))
     reference = dict(zip(base["ids"], base["values"])) if base else {}
-    motions = {}
+    motions, previous = {}, {}
     if distance:
         basis = base["basis"]
         assert basis["seq"] == baseline - distance
@@ -336,25 +336,31 @@ def reference_decode(frame, held):
                     motion[4:7] = [now[c] - then[c] for c in range(4, 7)]
             reference[body] = [now[c] + (motion[c] * num) // den for c in range(7)]  # floor
             motions[body] = motion
+        previous = {body: [max(-8, min(8, r)) for r in residual] for body, residual in base["residuals"].items()}
 
     if flags & 4:  # RANGE_CODED: signed residuals, the index one modular
-        table = range_decode_reference(payload[pos:], [motions.get(body, [0] * 7) for body in ids])
+        table = range_decode_reference(payload[pos:], [motions.get(body, [0] * 7) for body in ids],
+                                       [previous.get(body, [0] * 7) for body in ids])
         columns = [[v if c == 3 else (v << 1) ^ (v >> 63) for v in table[c]] for c in range(7)]
     else:
         columns = [stream(count) for _ in range(7 if mode == 0 else 13)]
         assert pos == len(payload)
     assert len(ids) == count
 
-    values = []
+    values, residuals = [], {}
     for i, body in enumerate(ids):
         ref = reference.get(body, [0] * len(columns))
         if mode == 0:
-            row = [ref[c] + ((columns[c][i] >> 1) ^ -(columns[c][i] & 1)) for c in range(7)]
-            row[3] = (ref[3] + columns[3][i]) % 4
+            residual = [(columns[c][i] >> 1) ^ -(columns[c][i] & 1) for c in range(7)]
+            residual[3] = columns[3][i]
+            row = [ref[c] + residual[c] for c in range(7)]
+            row[3] %= 4
+            if base is not None:
+                residuals[body] = residual
         else:
             row = [ref[c] ^ columns[c][i] for c in range(13)]
         values.append(row)
-    held[seq] = {"seq": seq, "step": step, "ids": ids, "values": values, "basis": base}
+    held[seq] = {"seq": seq, "step": step, "ids": ids, "values": values, "basis": base, "residuals": residuals}
 
     if mode == 1:
         floats = [[struct.unpack("<d", struct.pack("<Q", v))[0] for v in row] for row in values]
@@ -370,10 +376,10 @@ def reference_decode(frame, held):
     return (seq, ids, np.array(positions).reshape(-1, 3), np.array(orientations).reshape(-1, 4))
 
 
-def range_decode_reference(data, motion):
+def range_decode_reference(data, motion, previous):
     """The range-coded table of the module docstring ("Range-coded body state"),
-    decoded bit by bit in plain Python: 7 columns of len(motion) values. `motion`: one
-    list of 7 motions per row."""
+    decoded bit by bit in plain Python: 7 columns of len(motion) values. `motion` and
+    `previous`: one list of 7 values per row."""
     rows, pos = len(motion), 0
     state = {"range": 2 ** 32 - 1, "code": int.from_bytes(data[:4], "big")}
     pos = 4
@@ -430,7 +436,8 @@ def range_decode_reference(data, motion):
         for i in range(rows):
             previous_column = 0 if c in (0, 4) else table[c - 1][i]
             previous_row = table[c][i - 1] if i else 0
-            ctx = min((length(motion[i][c]) + 2 * length(previous_column) + length(previous_row) + 1) // 2, 23)
+            ctx = (min((length(motion[i][c]) + 2 * length(previous_column) + length(previous_row) + 1) // 2, 23),
+                   min(length(previous[i][c]), 3))
             k = 0
             while k < 20 and bit(classes.setdefault((c, ctx, k), fresh())):
                 k += 1
@@ -439,7 +446,8 @@ def range_decode_reference(data, motion):
             assert k <= 62
             if k == 0:
                 continue
-            negative = bit(signs.setdefault((c, sign(previous_column), sign(previous_row)), fresh()))
+            negative = bit(signs.setdefault((c, sign(previous_column), sign(previous_row), sign(previous[i][c])),
+                                            fresh()))
             u = 1
             for j in range(min(k - 1, 2)):
                 u = (u << 1) | bit(tops.setdefault((c, k, j), fresh()))
@@ -986,10 +994,11 @@ def test_frame_sizes_for_3008_bodies():
         largest[predict] = max(falling[1:])
         print(f"3008 bodies in free fall, predict={predict}: deltas {min(falling[1:])}.."
               f"{max(falling[1:])} bytes")
-    # Measured 357..634 bytes with prediction, 154..1607 without: without, the residual
+    # Measured 78..472 bytes with prediction, 154..1607 without: without, the residual
     # is the whole motion since the baseline, which grows with the speed; with it, the
-    # second difference of three roundings plus g dt^2 (1.4 steps), whatever the speed.
-    assert largest[True] < 1000 and largest[False] > largest[True]
+    # second difference of three roundings plus g dt^2 (1.4 steps), whatever the speed,
+    # and the range coder's previous-residual context learns that g dt^2 persists.
+    assert largest[True] < 700 and largest[False] > largest[True]
 
     positions = rng.uniform(-20, 20, (N_BOXES3000, 3))
     q = unit_quaternions(rng, N_BOXES3000)

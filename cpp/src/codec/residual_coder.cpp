@@ -15,7 +15,9 @@ namespace {
 constexpr int kUnaryClasses = 20;
 constexpr int kEscapeBits = 6;  // k - kUnaryClasses <= 62 - 20 fits in 6 bits
 constexpr int kMaxClass = 62;   // |v| < 2^62
-constexpr int kContexts = 24;   // per column, see the header
+constexpr int kActivity = 24;   // activity classes, see the header
+constexpr int kPrevious = 4;    // classes of the previous residual: bit length 0, 1, 2, 3+
+constexpr int kContexts = kActivity * kPrevious;  // per column
 constexpr int kTopBits = 16;    // range normalisation threshold: 2^24
 
 // An adaptive probability that the next bit is 0, in 1/65536, and how many updates it
@@ -47,11 +49,17 @@ inline int sign_class(std::int64_t v) { return v > 0 ? 1 : (v < 0 ? 2 : 0); }
 struct Model {
   explicit Model(int columns)
       : classes(static_cast<std::size_t>(columns) * kContexts * kUnaryClasses),
-        signs(static_cast<std::size_t>(columns) * 9),
+        signs(static_cast<std::size_t>(columns) * 27),
         tops(static_cast<std::size_t>(columns) * 64 * 2) {}
   std::vector<Prob> classes;  // [column][context][unary position]
-  std::vector<Prob> signs;    // [column][sign of previous column][sign of previous row]
+  std::vector<Prob> signs;    // [column][sign of previous column][of previous row][of previous]
   std::vector<Prob> tops;     // [column][class][first or second bit below the leading one]
+};
+
+// Side tables both ends hold (either may be null: all zeros).
+struct SideInfo {
+  const std::int64_t* motion;
+  const std::int64_t* previous;
 };
 
 // What both ends know before coding value (row, column): its class context and the
@@ -61,18 +69,20 @@ struct Context {
   int sign;
 };
 
-inline Context context_of(const std::int64_t* values, const std::int64_t* motion,
-                          const ResidualLayout& layout, std::int64_t row, int column) {
+inline Context context_of(const std::int64_t* values, const SideInfo& side, const ResidualLayout& layout,
+                          std::int64_t row, int column) {
   const std::int64_t at = row * layout.columns + column;
   const bool group_start = column == 0 || ((layout.group_starts >> column) & 1u);
   const std::int64_t previous_column = group_start ? 0 : values[at - 1];
   const std::int64_t previous_row = row > 0 ? values[at - layout.columns] : 0;
-  const int a = std::min(motion ? bit_length(motion[at]) : 0, 15);
+  const std::int64_t previous = side.previous ? side.previous[at] : 0;
+  const int a = std::min(side.motion ? bit_length(side.motion[at]) : 0, 15);
   const int b = std::min(bit_length(previous_column), 15);
   const int n = std::min(bit_length(previous_row), 15);
-  const int klass = std::min((a + 2 * b + n + 1) / 2, kContexts - 1);
-  return {column * kContexts + klass,
-          (column * 3 + sign_class(previous_column)) * 3 + sign_class(previous_row)};
+  const int activity = std::min((a + 2 * b + n + 1) / 2, kActivity - 1);
+  const int f = std::min(bit_length(previous), kPrevious - 1);
+  return {(column * kActivity + activity) * kPrevious + f,
+          ((column * 3 + sign_class(previous_column)) * 3 + sign_class(previous_row)) * 3 + sign_class(previous)};
 }
 
 class Encoder {
@@ -199,7 +209,7 @@ void check_layout(const ResidualLayout& layout) {
 }  // namespace
 
 std::vector<std::uint8_t> encode_residuals(const std::int64_t* residuals, const std::int64_t* motion,
-                                           const ResidualLayout& layout) {
+                                           const std::int64_t* previous, const ResidualLayout& layout) {
   check_layout(layout);
   const std::int64_t count = layout.rows * layout.columns;
   for (std::int64_t i = 0; i < count; ++i) {
@@ -208,12 +218,13 @@ std::vector<std::uint8_t> encode_residuals(const std::int64_t* residuals, const 
                             std::to_string(i / layout.columns) + ", column " +
                             std::to_string(i % layout.columns) + " is not below 2^62 in magnitude");
   }
+  const SideInfo side{motion, previous};
   Model model(layout.columns);
   Encoder enc;
   for (int column = 0; column < layout.columns; ++column) {
     for (std::int64_t row = 0; row < layout.rows; ++row) {
       const std::int64_t v = residuals[row * layout.columns + column];
-      const Context ctx = context_of(residuals, motion, layout, row, column);
+      const Context ctx = context_of(residuals, side, layout, row, column);
       const int k = bit_length(v);
       Prob* unary = &model.classes[static_cast<std::size_t>(ctx.klass) * kUnaryClasses];
       int j = 0;
@@ -240,17 +251,19 @@ std::vector<std::uint8_t> encode_residuals(const std::int64_t* residuals, const 
 }
 
 bool decode_residuals(const std::uint8_t* data, std::size_t size, const std::int64_t* motion,
-                      const ResidualLayout& layout, std::int64_t* out, std::string* why) {
+                      const std::int64_t* previous, const ResidualLayout& layout, std::int64_t* out,
+                      std::string* why) {
   check_layout(layout);
   auto fail = [&](std::string reason) {
     if (why) *why = std::move(reason);
     return false;
   };
+  const SideInfo side{motion, previous};
   Model model(layout.columns);
   Decoder dec(data, size);
   for (int column = 0; column < layout.columns; ++column) {
     for (std::int64_t row = 0; row < layout.rows; ++row) {
-      const Context ctx = context_of(out, motion, layout, row, column);
+      const Context ctx = context_of(out, side, layout, row, column);
       Prob* unary = &model.classes[static_cast<std::size_t>(ctx.klass) * kUnaryClasses];
       int k = 0;
       while (k < kUnaryClasses && dec.bit(unary[k])) ++k;

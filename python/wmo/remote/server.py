@@ -281,7 +281,7 @@ class Server:
     create_scenes: a client may open a scene that does not exist (it starts empty).
     position_resolution, orientation_bits: the precision of compressed-mode snapshots
         (m; bits per smallest-three component, 6..16). The defaults, 1/512 m and 9 bits
-        (Fiedler's), stream boxes3000 at 1.7 Mbit/s; 1 mm and 12 bits at 2.6.
+        (Fiedler's), stream boxes3000 at 1.77 Mbit/s; 1 mm and 12 bits at 2.62.
         Full-mode clients get exact values whatever these are.
     """
 

@@ -137,15 +137,19 @@ with the adaptive binary range coder of ``cpp/src/codec/residual_coder.cpp``:
   1, ... until a 0 or 20 ones, each bit with probability classes[column][ctx][j];
   after 20 ones, k = 20 + 6 plain bits (most significant first; k > 62 refuses the
   frame). For k > 0: the sign (1 = negative) with probability
-  signs[column][sp][sn], then the bits of |v| below its leading one, most significant
-  first: the first two (those that exist) with probabilities tops[column][k][0] and
-  [1], the others plain.
-- ctx = min((a + 2 b + n + 1) // 2, 23) with a the bit length of the body's
-  motion m in this column (module text above; 0 without prediction) capped at 15, b that
-  of this body's value in the previous column (0 for columns 0 and 4, which start a
+  signs[column][sp][sn][sf], then the bits of |v| below its leading one, most
+  significant first: the first two (those that exist) with probabilities
+  tops[column][k][0] and [1], the others plain.
+- ctx = (min((a + 2 b + n + 1) // 2, 23), min(f, 3)) with a the bit length of the
+  body's motion m in this column (module text above; 0 without prediction), b that of
+  this body's value in the previous column (0 for columns 0 and 4, which start a
   group), n that of the previous body's value in this column (0 for the first body),
-  both capped at 15; sp and sn are the signs (0 zero, 1 positive, 2 negative) of those
-  two values.
+  all three capped at 15, and f that of the body's *previous residual*: the residual
+  the baseline's own frame carried for this body in this column (its frame had a
+  baseline whenever this one predicts), clipped to -8..8; 0 without prediction, for a
+  body absent from the baseline, or for a baseline key frame. sp, sn and sf are the
+  signs (0 zero, 1 positive, 2 negative) of the previous column's value, the previous
+  body's value and the previous residual.
 
 Deltas are always taken against the *quantized* values (and predictions made from
 them), which client and server hold identically, so quantization errors never
@@ -315,6 +319,10 @@ class _Record:
     # Encoder only: this seq was coded against more than one basis, so a client may
     # hold either version, and no frame may predict from it.
     ambiguous: bool = False
+    # Compressed mode, when this snapshot's frame had a baseline: the residuals it
+    # carried, clipped to -8..8 (int8; the range coder uses only their sign and bit
+    # length up to 3), the context of a frame that predicts from this one.
+    residual: np.ndarray | None = None
 
     def same_content(self, other: "_Record") -> bool:
         return (self.mode == other.mode and self.resolution == other.resolution
@@ -365,6 +373,25 @@ def _predicted(base: _Record, num: int, den: int) -> tuple[np.ndarray, np.ndarra
     motion[motion[:, 3] != 0, 4:] = 0
     motion[:, 3] = 0
     return values + np.floor_divide(motion * num, den), motion
+
+
+def _side_info(base: _Record, base_motion: np.ndarray, present: np.ndarray,
+               rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The range coder's side information for a frame predicting from `base`, row by
+    row of the frame (zeros for bodies new to the baseline): the baseline's motion and
+    the residuals the baseline's own frame carried (module docstring)."""
+    n = len(present)
+    motion = np.zeros((n, _COMPRESSED_STREAMS), dtype=np.int64)
+    motion[present] = base_motion[rows[present]]
+    previous = np.zeros((n, _COMPRESSED_STREAMS), dtype=np.int64)
+    if base.residual is not None:
+        previous[present] = base.residual[rows[present]]
+    return motion, previous
+
+
+def _clipped(residual: np.ndarray) -> np.ndarray:
+    """Residuals as a baseline keeps them for the range coder's context: -8..8, int8."""
+    return np.clip(residual, -8, 8).astype(np.int8)
 
 
 # ---------------------------------------------------------------------------------------
@@ -627,7 +654,7 @@ class SnapshotEncoder:
             possible baselines; bounds its memory.
         level: zlib compression level of the payload, -1..9.
         coder: how compressed mode codes the body state: "range" (the adaptive range
-            coder with contexts, ``wmo._core.codec``: 26 % smaller than "zlib" on the
+            coder with contexts, ``wmo._core.codec``: 29 % smaller than "zlib" on the
             boxes3000 stream at the default precision) or "zlib" (byte planes, left to
             the payload's zlib; the format of version 1 frames).
         predict: in compressed mode, code against the baseline's extrapolated motion
@@ -719,7 +746,9 @@ class SnapshotEncoder:
                 parts.append(struct.pack("<I", len(added)))
                 _put_stream(parts, _id_gaps(added))
         reference = np.zeros_like(record.values)
-        motion = None  # the baseline's motion, row by row of this frame, when predicting
+        # When predicting: the baseline's motion and its own residuals, row by row of
+        # this frame (the range coder's side information).
+        motion = previous = None
         distance = 0
         if base is not None:
             source = base.values
@@ -727,16 +756,17 @@ class SnapshotEncoder:
             if gaps is not None:
                 distance = gaps[0]
                 source, base_motion = _predicted(base, gaps[1], gaps[2])
-                motion = np.zeros_like(record.values)
-                motion[present] = base_motion[rows[present]]
+                motion, previous = _side_info(base, base_motion, present, rows)
             reference[present] = source[rows[present]]
             record.basis = _basis_of(base)
         if self._mode == 0:
             delta = record.values - reference
             delta[:, 3] %= 4  # largest-component index: modular, 0..3
+            if base is not None:
+                record.residual = _clipped(delta)
             if self.coder == "range":
                 flags |= _FLAG_RANGE
-                parts.append(_codec.encode_residuals(delta, motion, _RANGE_GROUPS))
+                parts.append(_codec.encode_residuals(delta, motion, previous, _RANGE_GROUPS))
             else:
                 for column in range(_COMPRESSED_STREAMS):
                     if column == 3:
@@ -930,17 +960,17 @@ class SnapshotDecoder:
             present, rows = _match(base.ids, ids)
 
         # The values the residuals are against, one row per baseline body.
-        source = motion = None
+        source = motion = previous = None
         if base is not None:
             source = base.values
             if gaps is not None:
                 source, base_motion = _predicted(base, gaps[1], gaps[2])
-                motion = np.zeros((n, _COMPRESSED_STREAMS), dtype=np.int64)
-                motion[present] = base_motion[rows[present]]
+                motion, previous = _side_info(base, base_motion, present, rows)
         streams = _COMPRESSED_STREAMS if mode == 0 else _FULL_COLUMNS
         if range_coded:
             try:
-                residual = _codec.decode_residuals(payload[reader.pos:], n, streams, motion, _RANGE_GROUPS)
+                residual = _codec.decode_residuals(payload[reader.pos:], n, streams, motion, previous,
+                                                   _RANGE_GROUPS)
             except ValueError as exc:
                 raise SnapshotError(f"snapshot body state: {exc}") from None
         else:
@@ -980,6 +1010,8 @@ class SnapshotDecoder:
 
         record = _Record(info["seq"], info["step"], mode, resolution, bits_, ids, values,
                          basis=_basis_of(base))
+        if mode == 0 and base is not None:
+            record.residual = _clipped(residual)
         self._records[record.seq] = record
         self._records.move_to_end(record.seq)
         while len(self._records) > self.history:
