@@ -133,6 +133,14 @@ struct WorldSettings {
   ///     pairs), and an impulse there stops the approach (the pair's restitution above
   ///     the threshold), as the solver would at that contact. The potential energy the
   ///     move back gains is taken out of its kinetic energy: CCD never adds energy.
+  ///  3. The shock pass (in the solve stage, after each substep's relax passes): a CCD
+  ///     body faster than the restitution threshold that rests on another body (in
+  ///     the order of support from static and kinematic bodies) has its approach to
+  ///     that body taken out alone, as if the supporting body were fixed, bottom up, so
+  ///     a falling column stops box by box in the substep its bottom is stopped instead
+  ///     of driving into itself (20 boxes at 25 m/s: 0.22 m deep without it, 2.4 cm
+  ///     with it). It only slows the supported body along the normal: it never adds
+  ///     energy (world.cpp, shock_pass).
   ///  A fast non-CCD dynamic body can still pass through a slow CCD body: CCD belongs
   ///  to the body that moves fast.
   bool enable_ccd = true;
@@ -419,6 +427,11 @@ class World {
   void run_step();
   /// The ccd stage (world.h, WorldSettings::enable_ccd); returns the bodies swept.
   int continuous_step();
+  /// Orders the step's contacts for the CCD bodies' shock pass (world.cpp); returns
+  /// how many it holds.
+  int build_shock_order();
+  /// The shock pass over shock_order_ after a substep's relax passes (world.cpp).
+  void shock_pass(Real inv_h);
   bool ccd_active() const { return settings_.enable_ccd && ccd_count_ > 0; }
   void validate_state();
   void wake_island(int island);
@@ -501,6 +514,10 @@ class World {
   std::vector<std::uint64_t> ccd_seen_pairs_;  ///< row pairs with a contact constraint
   std::vector<std::uint8_t> body_flags_;
   std::vector<int> coupled_;  ///< awake bodies in contact this step (the substep loops' bodies)
+  /// The shock pass's contacts (index into constraints_, supporting body first), in
+  /// order of support depth; its BFS scratch.
+  std::vector<std::array<int, 3>> shock_order_;
+  std::vector<int> support_depth_, shock_queue_, shock_adjacency_start_, shock_adjacency_;
   std::vector<Real> sleep_time_;
   std::vector<std::int32_t> sleep_island_;
   std::vector<Vec3> sleep_position_;
