@@ -6,7 +6,7 @@ Runs 10 simulated seconds (600 steps of 1/60 s, or 600 k steps of 1/(60 k) with
 any step (World.max_penetration) and the wall time. Settings are World keywords:
 
     .venv/bin/python benchmarks/ccd/penetration.py                       # defaults: ~0.7 m
-    .venv/bin/python benchmarks/ccd/penetration.py --ccd all             # ~0.43 m (shock pass; 0.65 m before)
+    .venv/bin/python benchmarks/ccd/penetration.py --ccd all             # ~0.40 m (shock pass; 0.65 m before)
     .venv/bin/python benchmarks/ccd/penetration.py --set iterations=10   # ~0.7 m
     .venv/bin/python benchmarks/ccd/penetration.py --split 4 --set substeps=1            # ~0.86 m
     .venv/bin/python benchmarks/ccd/penetration.py --split 4 --set substeps=4 \\

@@ -454,7 +454,7 @@ def test_a_falling_ccd_column_stops_box_by_box():
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    "issue 4's bar, not met: boxes3000 with CCD on every box reaches 0.42-0.43 m with the shock "
+    "issue 4's bar, not met: boxes3000 with CCD on every box reaches 0.40-0.43 m with the shock "
     "pass (0.64-0.73 m before it; no CCD: 0.66-0.70 m; bar 0.10 m). What is left are not "
     "columns stopped from below but bodies the solve itself throws into their neighbours "
     "within a step (a box knocked upward at 3.5 m/s into the one falling on it at 12.7 m/s): "

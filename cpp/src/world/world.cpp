@@ -1361,11 +1361,22 @@ int World::build_shock_order() {
       shock_queue_.push_back(j);
     }
   }
+  const Real gravity_length = settings_.gravity.norm();
   for (int k = 0; k < m; ++k) {
     const ContactConstraint& c = constraints_[k];
     const int da = support_depth_[c.body_a], db = support_depth_[c.body_b];
-    if (da == db) continue;  // unsupported, or side by side: not a support
-    const bool a_lower = da < db;
+    bool a_lower;
+    if (da != db) {
+      a_lower = da < db;
+    } else {
+      // The same depth (both on one supporter, or both unsupported): a contact whose
+      // normal is within 60 degrees of the vertical is a support, the lower body the
+      // one gravity presses the other onto; others are side by side.
+      if (da == kUnsupported || !(gravity_length > 0)) continue;
+      const Real up = -c.normal.dot(settings_.gravity) / gravity_length;  // n from A to B
+      if (std::abs(up) < Real(0.5)) continue;
+      a_lower = up > 0;
+    }
     const int upper = a_lower ? c.body_b : c.body_a;
     if (!fast(upper)) continue;
     shock_order_.push_back({k, a_lower ? c.body_a : c.body_b, upper});
