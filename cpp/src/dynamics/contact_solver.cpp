@@ -104,14 +104,6 @@ namespace {
 
 constexpr int kMaxPoints = std::tuple_size_v<decltype(ContactConstraint{}.points)>;
 
-/// Separation (m) of point p now: at the step's start plus the bodies' motion since,
-/// at the current anchors ra, rb (turned with the bodies, see current_anchors).
-inline Real separation_now(const BodyState& a, const BodyState& b, const ContactConstraintPoint& p, const Vec3& n,
-                           const Vec3& ra, const Vec3& rb) {
-  const Vec3 d = (b.dp + rb) - (a.dp + ra);
-  return n.dot(d) + p.adjusted_separation;
-}
-
 /// What a normal row aims at, for separation s: a speculative gap (s > 0) may close
 /// within the substep (bias s / h, a rigid row); an overlap gets the soft bias and the
 /// spring's mass and impulse scales when use_bias, else none (a rigid relax row).

@@ -1334,13 +1334,10 @@ int World::build_shock_order() {
   }
   for (int i = 0; i < n; ++i) shock_adjacency_start_[i + 1] += shock_adjacency_start_[i];
   shock_adjacency_.resize(static_cast<std::size_t>(2) * m);
-  {
-    std::vector<int>& fill = shock_queue_;
-    fill.assign(shock_adjacency_start_.begin(), shock_adjacency_start_.end() - 1);
-    for (const ContactConstraint& c : constraints_) {
-      shock_adjacency_[fill[c.body_a]++] = c.body_b;
-      shock_adjacency_[fill[c.body_b]++] = c.body_a;
-    }
+  shock_fill_.assign(shock_adjacency_start_.begin(), shock_adjacency_start_.end() - 1);
+  for (const ContactConstraint& c : constraints_) {
+    shock_adjacency_[shock_fill_[c.body_a]++] = c.body_b;
+    shock_adjacency_[shock_fill_[c.body_b]++] = c.body_a;
   }
   // Depth of support: 0 for static and kinematic bodies, else 1 + the least depth
   // among the bodies it touches (breadth first, in index order: deterministic).
@@ -1397,14 +1394,16 @@ void World::shock_pass(Real inv_h) {
     const Vec3 n = a_lower ? c.normal : Vec3(-c.normal);
     const BodyState& sl = states_[lower];
     BodyState& su = states_[upper];
+    const BodyState& sa = states_[c.body_a];
+    const BodyState& sb = states_[c.body_b];
     for (int pass = 0; pass < 2; ++pass) {  // twice over the points: they share a body
       for (int j = 0; j < c.count; ++j) {
         const ContactConstraintPoint& cp = c.points[j];
+        // At the step's anchors, not the turned ones (current_anchors): the pass only
+        // needs the approach to an impact, and the turned anchors cost a rotation per point.
         const Vec3& rl = a_lower ? cp.ra : cp.rb;
         const Vec3& ru = a_lower ? cp.rb : cp.ra;
-        // The gap now (step-start anchors; the pass needs no more), >= 0 when apart.
-        const Real gap = cp.adjusted_separation + c.normal.dot((states_[c.body_b].dp + cp.rb) -
-                                                               (states_[c.body_a].dp + cp.ra));
+        const Real gap = separation_now(sa, sb, cp, c.normal, cp.ra, cp.rb);  // >= 0 when apart
         const Real lower_speed = n.dot(sl.v + sl.w.cross(rl));
         const Real upper_speed = n.dot(su.v + su.w.cross(ru));
         const Real target = std::min(lower_speed, Real(0)) - std::max(gap, Real(0)) * inv_h;

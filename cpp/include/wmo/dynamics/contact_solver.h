@@ -153,6 +153,14 @@ struct SolverSettings {
 void current_anchors(const BodyState& a, const BodyState& b, const ContactConstraintPoint& p, const Vec3& n,
                      Vec3& ra, Vec3& rb);
 
+/// Separation (m) of point p now: at the step's start plus the bodies' motion since,
+/// at the current anchors ra, rb (turned with the bodies, see current_anchors).
+inline Real separation_now(const BodyState& a, const BodyState& b, const ContactConstraintPoint& p, const Vec3& n,
+                           const Vec3& ra, const Vec3& rb) {
+  const Vec3 d = (b.dp + rb) - (a.dp + ra);
+  return n.dot(d) + p.adjusted_separation;
+}
+
 /// Turns since the step began up to this (sin^2 of half the angle: 0.05 rad) keep the
 /// step's effective masses outright (row_mass), without evaluating the turned ones.
 constexpr Real kRowMassTurnSin2 = 6.25e-4;

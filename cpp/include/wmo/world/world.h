@@ -515,9 +515,10 @@ class World {
   std::vector<std::uint8_t> body_flags_;
   std::vector<int> coupled_;  ///< awake bodies in contact this step (the substep loops' bodies)
   /// The shock pass's contacts (index into constraints_, supporting body first), in
-  /// order of support depth; its BFS scratch.
+  /// order of support depth; the contact graph (CSR: start, adjacency, fill cursor)
+  /// and the breadth-first search over it.
   std::vector<std::array<int, 3>> shock_order_;
-  std::vector<int> support_depth_, shock_queue_, shock_adjacency_start_, shock_adjacency_;
+  std::vector<int> shock_adjacency_start_, shock_adjacency_, shock_fill_, support_depth_, shock_queue_;
   std::vector<Real> sleep_time_;
   std::vector<std::int32_t> sleep_island_;
   std::vector<Vec3> sleep_position_;
