@@ -375,18 +375,24 @@ def _predicted(base: _Record, num: int, den: int) -> tuple[np.ndarray, np.ndarra
     return values + np.floor_divide(motion * num, den), motion
 
 
+def _gather(table: np.ndarray, present: np.ndarray, rows: np.ndarray | None) -> np.ndarray:
+    """A baseline table's rows for this frame's bodies: row rows[i] for body i where
+    present[i], zeros for a body new to the baseline; rows None (the same ids) gives
+    `table` itself, not a copy (callers only read it)."""
+    if rows is None:
+        return table
+    out = np.zeros((len(present),) + table.shape[1:], dtype=table.dtype)
+    out[present] = table[rows[present]]
+    return out
+
+
 def _side_info(base: _Record, base_motion: np.ndarray, present: np.ndarray,
-               rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+               rows: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
     """The range coder's side information for a frame predicting from `base`, row by
     row of the frame (zeros for bodies new to the baseline): the baseline's motion and
-    the residuals the baseline's own frame carried (module docstring)."""
-    n = len(present)
-    motion = np.zeros((n, _COMPRESSED_STREAMS), dtype=np.int64)
-    motion[present] = base_motion[rows[present]]
-    previous = np.zeros((n, _COMPRESSED_STREAMS), dtype=np.int64)
-    if base.residual is not None:
-        previous[present] = base.residual[rows[present]]
-    return motion, previous
+    the residuals the baseline's own frame carried (module docstring; None for zeros)."""
+    previous = None if base.residual is None else _gather(base.residual, present, rows)
+    return _gather(base_motion, present, rows), previous
 
 
 def _clipped(residual: np.ndarray) -> np.ndarray:
@@ -737,7 +743,7 @@ class SnapshotEncoder:
             flags |= _FLAG_BASELINE
             if np.array_equal(base.ids, record.ids):
                 flags |= _FLAG_SAME_IDS
-                present, rows = np.ones(n, dtype=bool), np.arange(n)
+                present, rows = np.ones(n, dtype=bool), None  # row i is the baseline's row i
             else:
                 present, rows = _match(base.ids, record.ids)
                 keep, _ = _match(record.ids, base.ids)
@@ -757,7 +763,7 @@ class SnapshotEncoder:
                 distance = gaps[0]
                 source, base_motion = _predicted(base, gaps[1], gaps[2])
                 motion, previous = _side_info(base, base_motion, present, rows)
-            reference[present] = source[rows[present]]
+            reference = _gather(source, present, rows)
             record.basis = _basis_of(base)
         if self._mode == 0:
             delta = record.values - reference
@@ -944,7 +950,7 @@ class SnapshotDecoder:
                 raise SnapshotError(f"snapshot {info['seq']} keeps its baseline's ids but counts "
                                     f"{n} bodies, the baseline {base_count}")
             ids = base.ids.copy()
-            present, rows = np.ones(n, dtype=bool), np.arange(n)
+            present, rows = np.ones(n, dtype=bool), None  # row i is the baseline's row i
         else:
             mask = np.frombuffer(reader.take((base_count + 7) // 8, "keep mask"), dtype=np.uint8)
             bits = np.unpackbits(mask, bitorder="little")
@@ -997,10 +1003,7 @@ class SnapshotDecoder:
             linear = angular = None
             resolution, bits_ = info["position_resolution"], info["orientation_bits"]
         else:
-            reference = np.zeros((n, streams), dtype=np.uint64)
-            if base is not None:
-                reference[present] = source[rows[present]]
-            values = coded ^ reference
+            values = coded if base is None else coded ^ _gather(source, present, rows)
             floats = values.view(np.float64)
             if not np.isfinite(floats).all():
                 raise SnapshotError("snapshot full-mode values are not all finite")
@@ -1044,13 +1047,10 @@ def _inflate(body: bytes, length: int) -> bytes:
 
 
 def _reconstruct_compressed(residual: np.ndarray, source: np.ndarray | None, present: np.ndarray,
-                            rows: np.ndarray, info: dict) -> np.ndarray:
+                            rows: np.ndarray | None, info: dict) -> np.ndarray:
     """Reference values (the baseline's, maybe predicted) plus residuals (int64, the
     index column modular), each checked against its valid range."""
-    n = len(residual)
-    reference = np.zeros((n, _COMPRESSED_STREAMS), dtype=np.int64)
-    if source is not None:
-        reference[present] = source[rows[present]]
+    reference = 0 if source is None else _gather(source, present, rows)
     if ((residual[:, 3] < 0) | (residual[:, 3] > 3)).any():
         raise SnapshotError("snapshot largest-component residual outside 0..3")
     # Compared both ways, not with abs(): abs of int64's minimum wraps to negative.
