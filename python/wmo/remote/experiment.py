@@ -118,7 +118,10 @@ def _light_watchers(url: str, scene: str, n: int) -> None:
     asyncio.run(main())
 
 
-def _measure(url: str, run: Run, seconds: float, scene: str) -> None:
+def _measure(url: str, run: Run, seconds: float, scene: str, scene_base: str | None = None) -> None:
+    """Records `run` for `seconds` from a client at `url`. With `scene_base`, the scene is
+    loaded afresh from it once every client is connected, so the run covers the scene's
+    first `seconds` of motion, whatever the run before it left."""
     from .client import connect
 
     # The other clients watch from another process (see _light_watchers).
@@ -138,7 +141,9 @@ def _measure(url: str, run: Run, seconds: float, scene: str) -> None:
             deadline = time.monotonic() + 30
             while c.stats()["clients"] < run.clients and time.monotonic() < deadline:
                 time.sleep(0.1)
-            t0 = time.time()
+        if scene_base is not None:
+            c.load_scene(scene_base, sleeping=False)  # returns once the server applied it
+        t0 = time.time()
         c.on_snapshot(record)
         while time.time() - t0 < seconds:
             st = c.stats()
@@ -185,9 +190,6 @@ def run_latency_experiment(out: Path, delays_ms=(0, 20, 40, 100), seconds: float
                 print(f"browser view: http://127.0.0.1:{view_port} (live while the experiment runs)", flush=True)
 
             for label, preset in settings:
-                # Each run starts from the scene as loaded, so runs see the same motion.
-                with connect(f"ws://127.0.0.1:{sport}", scene="exp") as ctl:
-                    ctl.load_scene(scene_base, sleeping=False)
                 pport = _free_port()
                 pargs = ["-m", "wmo.remote.proxy", "--target", f"127.0.0.1:{sport}", "--listen", f"127.0.0.1:{pport}"]
                 for k in ("delay", "jitter"):
@@ -202,8 +204,9 @@ def run_latency_experiment(out: Path, delays_ms=(0, 20, 40, 100), seconds: float
                     _wait_port(pport, proxy)
                     run = Run(label, 1000 * preset.get("delay", 0.0), 1000 * preset.get("jitter", 0.0),
                               preset.get("loss", 0.0), mode, clients)
-                    time.sleep(warmup if runs else 0.0)
-                    _measure(f"ws://127.0.0.1:{pport}", run, seconds, "exp")
+                    time.sleep(warmup if runs else 0.0)  # the previous run's clients leave
+                    # Each run starts from the scene as loaded, so runs see the same motion.
+                    _measure(f"ws://127.0.0.1:{pport}", run, seconds, "exp", scene_base)
                     runs.append(run)
                     s = run.summary()
                     print(f"{label:>10}: server {s['server_steps_per_s']:.1f} steps/s, client "
