@@ -1304,10 +1304,10 @@ void World::run_step() {
 // were fixed: its velocity along the normal becomes min(supporter's, 0) less what the
 // speculative gap allows, where it approaches faster than that by more than the
 // restitution threshold (an impact; slower approaches are the solver's). Only CCD
-// bodies faster than that threshold at the step's start are supported this way, so a
-// scene at rest costs a look at each contact. The supported body only slows along the normal (its new
-// normal speed lies between its old one and 0), so its kinetic energy never grows, and
-// the supporting body is untouched: the pass never adds energy.
+// bodies faster than that threshold at the step's start take part (build_shock_order).
+// The supported body only slows along the normal (its new normal speed lies between
+// its old one and 0), so its kinetic energy never grows, and the supporting body is
+// untouched: the pass never adds energy.
 int World::build_shock_order() {
   const int n = body_count();
   const int m = static_cast<int>(constraints_.size());
