@@ -274,7 +274,8 @@ class World:
     def __init__(self, gravity: npt.ArrayLike | None = None, dt: float = 1.0 / 60,
                  substeps: int = 4, iterations: int = 1, relax_iterations: int = 2,
                  contact_hertz: float = 36.0, contact_damping_ratio: float = 10.0,
-                 contact_push_max: float = 3.0, contact_static_hertz_scale: float = 2.0,
+                 contact_push_max: float = 3.0, contact_max_sag: float = 0.0,
+                 contact_static_hertz_scale: float = 2.0,
                  restitution_threshold: float = 1.0,
                  speculative_distance: float = 0.04, speculative_motion: float = 0.0,
                  speculative_motion_static: float = 1.0,
@@ -284,7 +285,8 @@ class World:
                  sleeping: bool = True, sleep_linear_threshold: float = 0.05,
                  sleep_angular_threshold: float = 0.0349, time_to_sleep: float = 0.5,
                  threads: int = 1, ccd: bool = True, ccd_motion_threshold: float = 0.5,
-                 ccd_penetration: float = 0.05, block_solver: bool = False) -> None: ...
+                 ccd_penetration: float = 0.05, block_solver: bool = False,
+                 centroid_rows: bool = False) -> None: ...
     def add_body(self, shape: Shape, position: npt.ArrayLike | None = None,
                  orientation: npt.ArrayLike | None = None, kind: str = "dynamic",
                  mass: float | None = None, density: float = 1000.0, friction: float = 0.5,

@@ -69,16 +69,20 @@ WMO_THREADS = 1
 WMO_CONTACT_HERTZ: float | None = None
 #: World(block_solver=...): each contact pair's normal rows solved together (scalar solver).
 WMO_BLOCK_SOLVER = False
+#: World(centroid_rows=...): each contact pair's centroid row before its point rows.
+WMO_CENTROID_ROWS = False
 
 
 def run_wmo(spec: _scenes.BoxScene, steps: int, dt: float, iterations: int, substeps: int,
             sleeping: bool) -> EngineRun:
     extra = {} if WMO_CONTACT_HERTZ is None else {"contact_hertz": WMO_CONTACT_HERTZ}
     world = _scenes.build(spec, dt=dt, substeps=substeps, iterations=1, sleeping=sleeping,
-                          threads=WMO_THREADS, block_solver=WMO_BLOCK_SOLVER, **extra)
+                          threads=WMO_THREADS, block_solver=WMO_BLOCK_SOLVER,
+                          centroid_rows=WMO_CENTROID_ROWS, **extra)
     hertz = "default contact Hz" if WMO_CONTACT_HERTZ is None else f"{WMO_CONTACT_HERTZ:g} Hz contacts"
     relax = world.settings["relax_iterations"]
     rows = ", block-solved manifolds" if WMO_BLOCK_SOLVER else ""
+    rows += ", centroid rows" if WMO_CENTROID_ROWS else ""
     run = EngineRun("wmo", f"wmo {_version()}",
                     f"dt {dt:g}, {substeps} substeps x 1 iteration + {relax} relax{rows}, {hertz}, "
                     f"sleeping {'on' if sleeping else 'off'}, {WMO_THREADS} thread(s)")
@@ -308,6 +312,7 @@ def measure_memory(scene: str = "boxes3000", steps: int = 600, engines: Iterable
             raise ValueError(f"engine must be one of {list(RUNNERS)}, got {name!r}")
         code = (f"from wmo import bench; bench.WMO_THREADS = {WMO_THREADS!r}; "
                 f"bench.WMO_CONTACT_HERTZ = {WMO_CONTACT_HERTZ!r}; bench.WMO_BLOCK_SOLVER = {WMO_BLOCK_SOLVER!r}; "
+                f"bench.WMO_CENTROID_ROWS = {WMO_CENTROID_ROWS!r}; "
                 f"bench._memory_child({scene!r}, {name!r}, {steps}, {dt!r}, {iterations}, {substeps}, {sleeping})")
         proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
         if proc.returncode != 0:

@@ -72,6 +72,9 @@ def main(argv: list[str] | None = None) -> int:
                         "stands to the centimetre)")
     b.add_argument("--block-solver", action="store_true",
                    help="WMO solves each contact pair's normal rows together (World(block_solver=True))")
+    b.add_argument("--centroid-rows", action="store_true",
+                   help="WMO gives each contact pair a centroid row before its point rows "
+                        "(World(centroid_rows=True))")
     b.add_argument("--memory", action="store_true",
                    help="also measure each engine's peak memory, in a fresh process each (Linux)")
     sv = sub.add_parser("serve", help="run a server that simulates scenes for remote clients")
@@ -130,6 +133,7 @@ def main(argv: list[str] | None = None) -> int:
         bench.WMO_THREADS = args.threads
         bench.WMO_CONTACT_HERTZ = args.contact_hertz
         bench.WMO_BLOCK_SOLVER = args.block_solver
+        bench.WMO_CENTROID_ROWS = args.centroid_rows
         try:
             result = bench.run_bench(args.scene, steps=args.steps, engines=engines, dt=args.dt,
                                      iterations=args.iterations, substeps=args.substeps,

@@ -210,7 +210,7 @@ WMO_INLINE V3 relative_velocity(const Bodies& a, const Bodies& b, const V3& ra, 
 /// start plus the change the motion made) and its effective mass (row_mass). The
 /// motion changes only between passes (integrate_positions), so the passes share these
 /// instead of each turning the anchors again.
-WMO_CLONES void turn_groups(Group* groups, int count, const MotionRow* rows) {
+WMO_CLONES void turn_groups(Group* groups, int count, const MotionRow* rows, bool centroid_rows) {
   const v8 zero = splat(0);
   for (int k = 0; k < count; ++k) {
     Group& g = groups[k];
@@ -223,6 +223,8 @@ WMO_CLONES void turn_groups(Group* groups, int count, const MotionRow* rows) {
     // not evaluated at all.
     const m8 lane_turned = vmax(a.turn2, b.turn2) > splat(static_cast<float>(kRowMassTurnSin2));
     const bool turned = any(lane_turned);
+    const v8 points = ld(g.count);
+    V3 sum_a{zero, zero, zero}, sum_b{zero, zero, zero};
     for (int j = 0; j < g.points; ++j) {
       Group::Point& p = g.p[j];
       const V3 ra0 = ld3(p.ra), rb0 = ld3(p.rb);
@@ -245,6 +247,21 @@ WMO_CLONES void turn_groups(Group* groups, int count, const MotionRow* rows) {
         st(p.ra_now[r], r == 0 ? ra.x : r == 1 ? ra.y : ra.z);
         st(p.rb_now[r], r == 0 ? rb.x : r == 1 ? rb.y : rb.z);
       }
+      if (centroid_rows) {
+        const m8 real = splat(static_cast<float>(j)) < points;
+        const v8 w = real ? splat(1) : zero;
+        sum_a = sum_a + w * ra;
+        sum_b = sum_b + w * rb;
+      }
+    }
+    if (!centroid_rows) continue;
+    // The centroid row's anchors and coupling (solve_groups).
+    const v8 inv_points = points > zero ? splat(1) / points : zero;
+    const V3 ca = cross(inv_points * sum_a, n), cb = cross(inv_points * sum_b, n);
+    st(g.coupling, points * points * (m.ima + m.imb + dot(ca, mul(m.ia, ca)) + dot(cb, mul(m.ib, cb))));
+    for (int r = 0; r < 3; ++r) {
+      st(g.cn_a[r], r == 0 ? ca.x : r == 1 ? ca.y : ca.z);
+      st(g.cn_b[r], r == 0 ? cb.x : r == 1 ? cb.y : cb.z);
     }
   }
 }
@@ -294,17 +311,22 @@ WMO_CLONES void warm_start_groups(const Group* groups, int count, Row* rows) {
 
 /// One softness (Softness), as the passes read it.
 struct SoftLanes {
-  float bias_rate, mass_scale, impulse_scale;
+  float bias_rate, mass_scale, impulse_scale, a2;
 };
 
 WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, SoftLanes dyn, SoftLanes fix, float inv_h,
-                             float push_max, bool use_bias, bool reverse) {
+                             float push_max, bool use_bias, bool reverse, bool centroid_rows) {
   const v8 zero = splat(0), one = splat(1), vinv_h = splat(inv_h);
   const v8 neg_push = splat(-push_max);
   const v8 bias_rate_dyn = splat(dyn.bias_rate), bias_rate_fix = splat(fix.bias_rate);
   const v8 soft_mass_dyn = splat(use_bias ? dyn.mass_scale : 1), soft_mass_fix = splat(use_bias ? fix.mass_scale : 1);
   const v8 soft_impulse_dyn = splat(use_bias ? dyn.impulse_scale : 0);
   const v8 soft_impulse_fix = splat(use_bias ? fix.impulse_scale : 0);
+  const v8 a2_dyn = splat(dyn.a2), a2_fix = splat(fix.a2);
+  // 1 / a2 for the centroid row's regularisation of the biased rows (0 for a rigid
+  // spring, and in the relax passes).
+  const v8 inv_a2_dyn = splat(use_bias && dyn.a2 > 0 ? 1 / dyn.a2 : 0);
+  const v8 inv_a2_fix = splat(use_bias && fix.a2 > 0 ? 1 / fix.a2 : 0);
   for (int kk = 0; kk < count; ++kk) {
     const int k = reverse ? count - 1 - kk : kk;
     Group& g = groups[k];
@@ -312,10 +334,76 @@ WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, SoftLanes dyn,
     const v8 bias_rate = fixed ? bias_rate_fix : bias_rate_dyn;
     const v8 soft_mass = fixed ? soft_mass_fix : soft_mass_dyn;
     const v8 soft_impulse = fixed ? soft_impulse_fix : soft_impulse_dyn;
+    const v8 a2 = fixed ? a2_fix : a2_dyn;
+    const v8 inv_a2 = fixed ? inv_a2_fix : inv_a2_dyn;
     Bodies a = gather_velocities(g.row_a, rows), b = gather_velocities(g.row_b, rows);
     const Masses m = ld_masses(g);
     const V3 n = ld3(g.n);
-    for (int j = 0; j < g.points; ++j) {
+    if (centroid_rows && g.points >= 2) {
+      // The centroid row (centroid_row() of contact_solver.cpp, which says why): one
+      // impulse increment d at every point of the manifold that meets the rows'
+      // targets on average, d = -(sum vn + sum bias + sum g l) / (sum K_ij + sum g),
+      // before the point rows correct the rest. Lanes with fewer than two points or a
+      // speculative point (centroid_ok, set with the motion) are left out.
+      const v8 cnt = ld(g.count);
+      m8 ok = cnt > one;
+      v8 sum = zero, sum_g = zero, min_l = splat(3.0e38f);
+      // g_i = K_ii impulse_scale / mass_scale = K_ii / (L a2) for the biased rows'
+      // spring; 0 for the relax passes' rigid rows.
+      const v8 g_scale = use_bias ? ld(g.inv_stiffening) * inv_a2 : zero;
+      for (int j = 0; j < g.points; ++j) {
+        const Group::Point& p = g.p[j];
+        const m8 real = splat(static_cast<float>(j)) < cnt;
+        const v8 ni = ld(p.normal_impulse);
+        const v8 s = ld(p.separation);
+        ok = ok & (~real | (s <= zero));
+        min_l = real & (ni < min_l) ? ni : min_l;
+        if (use_bias) {
+          const v8 mass = ld(p.mass_now);
+          const v8 gi = real & (mass > zero) ? g_scale / mass : zero;
+          sum = sum + (real ? vmax(bias_rate * s, neg_push) : zero) + gi * ni;
+          sum_g = sum_g + gi;
+        }
+      }
+      // vn at the centroid: n.(v_b - v_a) + w_b.(rc_b x n) - w_a.(rc_a x n).
+      const V3 cna = ld3(g.cn_a), cnb = ld3(g.cn_b);
+      const v8 vnc = dot(n, b.v - a.v) + dot(b.w, cnb) - dot(a.w, cna);
+      const v8 denom = ld(g.coupling) + sum_g;
+      const m8 live = ok & (denom > zero);
+      v8 d = -(cnt * vnc + sum) / (live ? denom : one);
+      d = vmax(d, -min_l);
+      d = live ? d : zero;
+      m8 first[4], first_any = m8{};
+      for (int j = 0; j < g.points; ++j) {
+        Group::Point& p = g.p[j];
+        const m8 real = splat(static_cast<float>(j)) < cnt;
+        const v8 dj = real ? d : zero;
+        st(p.normal_impulse, ld(p.normal_impulse) + dj);
+        const v8 max_ni = ld(p.max_normal_impulse);
+        first[j] = (dj > zero) & (max_ni == zero);
+        first_any = first_any | first[j];
+        st(p.max_normal_impulse, vmax(max_ni, dj));
+      }
+      // record_push() for the points this row pushes first: the approach at the
+      // centroid stands for every point's (rare: a contact's first push in the step).
+      if (any(first_any)) {
+        for (int j = 0; j < g.points; ++j) {
+          Group::Point& p = g.p[j];
+          st(p.relative_velocity, first[j] ? vnc : ld(p.relative_velocity));
+          st(p.push_gap, first[j] ? zero : ld(p.push_gap));
+        }
+      }
+      // apply() of cnt d n at the centroid: cross(rc, cnt d n) = cnt d (rc x n).
+      const v8 push = cnt * d;
+      a.v = a.v - (m.ima * push) * n;
+      a.w = a.w - push * mul(m.ia, cna);
+      b.v = b.v + (m.imb * push) * n;
+      b.w = b.w + push * mul(m.ib, cnb);
+    }
+    // A backward pass visits the points backward too (symmetric Gauss-Seidel within the
+    // manifold as across the constraints; solve_contacts does the same).
+    for (int jj = 0; jj < g.points; ++jj) {
+      const int j = reverse ? g.points - 1 - jj : jj;
       Group::Point& p = g.p[j];
       // The anchors, separation and effective mass at the current motion (turn_groups).
       const V3 ra = ld3(p.ra_now), rb = ld3(p.rb_now);
@@ -326,8 +414,17 @@ WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, SoftLanes dyn,
       const m8 spec = s > zero;
       const v8 soft_bias = use_bias ? vmax(bias_rate * s, neg_push) : zero;
       const v8 bias = spec ? s * vinv_h : soft_bias;
-      const v8 mass_scale = spec ? one : soft_mass;
-      const v8 impulse_scale = spec ? zero : soft_impulse;
+      v8 row_mass_scale = soft_mass, row_impulse_scale = soft_impulse;
+      if (use_bias && g.stiffened) {  // row_target() of contact_solver.cpp
+        const v8 stiff = ld(g.stiffening);
+        const m8 stiffened = stiff > one;
+        const v8 la2 = stiff * a2;
+        const v8 is = one / (one + la2);
+        row_mass_scale = stiffened ? la2 * is : row_mass_scale;
+        row_impulse_scale = stiffened ? is : row_impulse_scale;
+      }
+      const v8 mass_scale = spec ? one : row_mass_scale;
+      const v8 impulse_scale = spec ? zero : row_impulse_scale;
       const v8 vn = dot(n, relative_velocity(a, b, ra, rb));
       const v8 ni = ld(p.normal_impulse);
       v8 impulse = -normal_mass * mass_scale * (vn + bias) - impulse_scale * ni;
@@ -345,7 +442,8 @@ WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, SoftLanes dyn,
       const V3 t1 = ld3(g.t1), t2 = ld3(g.t2);
       const v8 mu = ld(g.mu);
       const m8 has_mu = mu != zero;
-      for (int j = 0; j < g.points; ++j) {
+      for (int jj = 0; jj < g.points; ++jj) {
+        const int j = reverse ? g.points - 1 - jj : jj;  // backward in a backward pass
         Group::Point& p = g.p[j];
         const V3 ra = ld3(p.ra_now), rb = ld3(p.rb_now);
         const V3 dv = relative_velocity(a, b, ra, rb);
@@ -378,6 +476,7 @@ WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, SoftLanes dyn,
   }
 }
 
+
 }  // namespace
 
 void dependency_level_order(const std::vector<ContactConstraint>& cs, const std::vector<BodyState>& states,
@@ -409,7 +508,9 @@ void dependency_level_order(const std::vector<ContactConstraint>& cs, const std:
 }
 
 void WideContacts::build(const std::vector<ContactConstraint>& cs, const std::vector<int>& order,
-                         const std::vector<BodyState>& states, int dummy) {
+                         const std::vector<BodyState>& states, int dummy, const ContactSoftness& soft,
+                         Real max_sag, Real h, bool centroid_rows) {
+  centroid_rows_ = centroid_rows;
   groups_.clear();
   source_.clear();
   // Rows: 0 for the padding lanes, then the bodies in the order the groups use them.
@@ -488,6 +589,24 @@ void WideContacts::build(const std::vector<ContactConstraint>& cs, const std::ve
         p.tangent_impulse[1][lanes] = static_cast<float>(cp.tangent_impulse[1]);
         p.push_gap[lanes] = static_cast<float>(cp.push_gap);
       }
+      if (max_sag > 0 && c.load > 0) {
+        // The manifold's stiffening from its load (prepare_contacts does the same for
+        // the scalar passes), with the step's effective masses in double.
+        Real mass = 0;
+        for (int j = 0; j < c.count; ++j) {
+          const ContactConstraintPoint& cp = c.points[j];
+          const Vec3 cra = cp.ra.cross(c.normal), crb = cp.rb.cross(c.normal);
+          const Real k = sa.inv_mass + sb.inv_mass + cra.dot(sa.inv_inertia * cra) + crb.dot(sb.inv_inertia * crb);
+          if (k > 0) mass += 1 / k;
+        }
+        const Softness& row_soft = !moves(sa) || !moves(sb) ? soft.fixed : soft.dynamic;
+        const float stiff = static_cast<float>(stiffening(row_soft, max_sag, mass, c.load * h));
+        g.stiffening[lanes] = stiff;
+        g.inv_stiffening[lanes] = 1 / stiff;
+        g.stiffened = g.stiffened || stiff > 1;
+      } else {
+        g.stiffening[lanes] = g.inv_stiffening[lanes] = 1;
+      }
       source_.push_back(k);
       ++lanes;
       ++q;
@@ -514,7 +633,7 @@ void WideContacts::set_motion(const std::vector<BodyState>& states) {
     x.dq[3] = static_cast<float>(s.dq.w());
     x.turn2 = static_cast<float>(s.dq.vec().squaredNorm());
   }
-  turn_groups(groups_.data(), group_count(), motion_.data());
+  turn_groups(groups_.data(), group_count(), motion_.data(), centroid_rows_);
 }
 
 void WideContacts::load(const std::vector<BodyState>& states) {
@@ -552,14 +671,15 @@ void WideContacts::warm_start(std::vector<BodyState>& states) {
 }
 
 void WideContacts::solve(std::vector<BodyState>& states, const ContactSoftness& soft, Real inv_h,
-                         Real push_max, bool use_bias, bool reverse) {
+                         Real push_max, bool use_bias, bool reverse, bool centroid_rows) {
   load(states);
   auto lanes = [](const Softness& x) {
     return SoftLanes{static_cast<float>(x.bias_rate), static_cast<float>(x.mass_scale),
-                     static_cast<float>(x.impulse_scale)};
+                     static_cast<float>(x.impulse_scale), static_cast<float>(x.a2)};
   };
   solve_groups(groups_.data(), group_count(), rows_.data(), lanes(soft.dynamic), lanes(soft.fixed),
-               static_cast<float>(inv_h), static_cast<float>(push_max), use_bias, reverse);
+               static_cast<float>(inv_h), static_cast<float>(push_max), use_bias, reverse,
+               centroid_rows && centroid_rows_);
   store(states);
 }
 

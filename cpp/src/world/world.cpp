@@ -110,6 +110,7 @@ void validate_world_settings(const WorldSettings& s) {
   require_non_negative("contact_hertz", s.solver.contact_hertz);
   require_non_negative("contact_damping_ratio", s.solver.damping_ratio);
   require_non_negative("contact_push_max", s.solver.push_max);
+  require_non_negative("contact_max_sag", s.solver.max_sag);
   require_non_negative("contact_static_hertz_scale", s.solver.static_hertz_scale);
   require_non_negative("restitution_threshold", s.solver.restitution_threshold);
   require_non_negative("speculative_distance", s.speculative_distance);
@@ -1182,6 +1183,7 @@ void World::run_step() {
     flush_block();
     const ContactSoftness soft = contact_softness(settings_.solver, h);
     const bool contacts = !constraints_.empty();
+    if (contacts && settings_.solver.max_sag > 0) estimate_loads();
     // The passes: on WideContacts' lane groups, or with block_solver on the scalar
     // passes (double precision, the constraints in their top-down order), each
     // manifold's normal rows solved together (WorldSettings::block_solver).
@@ -1193,14 +1195,16 @@ void World::run_step() {
       // The passes run on lane groups, in an order equivalent to the constraints'
       // sequence (pairs top down) that keeps the groups full.
       dependency_level_order(constraints_, states_, solve_order_, level_scratch_);
-      wide_.build(constraints_, solve_order_, states_, n);
+      wide_.build(constraints_, solve_order_, states_, n, soft, settings_.solver.max_sag, h,
+                  settings_.centroid_rows);
     }
     const Real push_max = settings_.solver.push_max;
     auto pass = [&](bool use_bias, bool reverse) {
       if (scalar)
-        solve_contacts(constraints_, states_, soft, inv_h, push_max, use_bias, NormalRows::kBlock, reverse);
+        solve_contacts(constraints_, states_, soft, inv_h, push_max, use_bias, NormalRows::kBlock, reverse,
+                       settings_.centroid_rows);
       else
-        wide_.solve(states_, soft, inv_h, push_max, use_bias, reverse);
+        wide_.solve(states_, soft, inv_h, push_max, use_bias, reverse, settings_.centroid_rows);
     };
     const bool shock = contacts && ccd_active() && build_shock_order() > 0;
     for (int sub = 0; sub < substeps; ++sub) {
@@ -1308,6 +1312,81 @@ void World::run_step() {
 // The supported body only slows along the normal (its new normal speed lies between
 // its old one and 0), so its kinetic energy never grows, and the supporting body is
 // untouched: the pass never adds energy.
+// The weight each contact carries, for the load stiffening of its rows
+// (SolverSettings::max_sag). A contact whose normal (A to B) is within 60 degrees of
+// up (against gravity) supports B on A, one within 60 degrees of down A on B, if the
+// supported body is dynamic and its centre of mass is the higher of the two along up
+// (so the support relation has no cycles); side contacts carry nothing. A body's
+// weight, with everything it carries, is shared among its supports in proportion to
+// the cosine of each one's normal with up, and handed down: bodies are visited from
+// the highest down, so a body has received all its load before it passes it on. A
+// stack of N boxes then loads its k-th contact from the top with k boxes' weight, a
+// pyramid's lower rows with the rows above split between their two supports. Static
+// and kinematic bodies take what they are given. Costs a sort of the supported bodies
+// by height and two passes over the contacts; only when max_sag > 0.
+void World::estimate_loads() {
+  const int n = body_count();
+  const int m = static_cast<int>(constraints_.size());
+  for (ContactConstraint& c : constraints_) c.load = 0;
+  const Real g = settings_.gravity.norm();
+  if (!(g > 0)) return;
+  const Vec3 up = -settings_.gravity / g;
+  // Per contact: the supported body (or -1) and its share weight (the cosine).
+  load_upper_.assign(m, -1);
+  load_cos_.assign(m, 0);
+  load_total_cos_.assign(n, 0);
+  load_carried_.assign(n, 0);
+  load_bodies_.clear();
+  for (int k = 0; k < m; ++k) {
+    const ContactConstraint& c = constraints_[k];
+    const Real cosine = c.normal.dot(up);
+    int upper = -1, lower = -1;
+    if (cosine >= Real(0.5)) {
+      upper = c.body_b;
+      lower = c.body_a;
+    } else if (cosine <= Real(-0.5)) {
+      upper = c.body_a;
+      lower = c.body_b;
+    } else {
+      continue;
+    }
+    if (kinds_[upper] != BodyKind::kDynamic) continue;
+    if (kinds_[lower] == BodyKind::kDynamic && !(positions_[upper].dot(up) > positions_[lower].dot(up))) continue;
+    load_upper_[k] = upper;
+    load_cos_[k] = std::abs(cosine);
+    if (load_total_cos_[upper] == 0) load_bodies_.push_back(upper);
+    load_total_cos_[upper] += std::abs(cosine);
+  }
+  if (load_bodies_.empty()) return;
+  // The contacts by supported body (CSR), and the supported bodies from the top down
+  // (ties by index: deterministic).
+  load_start_.assign(n + 1, 0);
+  for (int k = 0; k < m; ++k)
+    if (load_upper_[k] >= 0) ++load_start_[load_upper_[k] + 1];
+  for (int i = 0; i < n; ++i) load_start_[i + 1] += load_start_[i];
+  load_contacts_.resize(load_start_[n]);
+  load_fill_.assign(load_start_.begin(), load_start_.end() - 1);
+  for (int k = 0; k < m; ++k)
+    if (load_upper_[k] >= 0) load_contacts_[load_fill_[load_upper_[k]]++] = k;
+  std::sort(load_bodies_.begin(), load_bodies_.end(), [&](int x, int y) {
+    const Real hx = positions_[x].dot(up), hy = positions_[y].dot(up);
+    return hx > hy || (hx == hy && x < y);
+  });
+  for (const int u : load_bodies_) {
+    const Real weight = (masses_[u].inv_mass > 0 ? gravity_scale_[u] / masses_[u].inv_mass : 0) * g +
+                        load_carried_[u];
+    if (!(weight > 0)) continue;
+    for (int j = load_start_[u]; j < load_start_[u + 1]; ++j) {
+      const int k = load_contacts_[j];
+      ContactConstraint& c = constraints_[k];
+      const Real share = weight * load_cos_[k] / load_total_cos_[u];
+      c.load = share;
+      const int lower = c.body_a == u ? c.body_b : c.body_a;
+      if (kinds_[lower] == BodyKind::kDynamic) load_carried_[lower] += share;
+    }
+  }
+}
+
 int World::build_shock_order() {
   const int n = body_count();
   const int m = static_cast<int>(constraints_.size());

@@ -33,9 +33,9 @@ __all__ = ["EditError", "SceneModel", "OPS", "SETTINGS", "SCENE_BUILDERS", "regi
 #: capped at 1000 (a scene is shared: one edit must not stall its thread).
 SETTINGS: dict[str, type] = {
     "gravity": list, "dt": float, "substeps": int, "iterations": int, "relax_iterations": int,
-    "block_solver": bool,
+    "block_solver": bool, "centroid_rows": bool,
     "contact_hertz": float, "contact_damping_ratio": float, "contact_push_max": float,
-    "contact_static_hertz_scale": float,
+    "contact_static_hertz_scale": float, "contact_max_sag": float,
     "restitution_threshold": float, "speculative_distance": float, "speculative_motion": float,
     "speculative_motion_static": float, "manifold_reuse_distance": float, "manifold_reuse_angle": float,
     "friction_combine": str, "restitution_combine": str, "sleeping": bool,

@@ -50,6 +50,15 @@ struct Softness {
   Real bias_rate = 0;      ///< 1/s: bias velocity per metre of penetration
   Real mass_scale = 1;     ///< scales the effective mass
   Real impulse_scale = 0;  ///< fraction of the accumulated impulse removed each pass
+  /// h omega (2 zeta + h omega), dimensionless: mass_scale / impulse_scale, the
+  /// spring's implicit stiffness per substep relative to the row's effective mass
+  /// (0 for a rigid row). A row stiffened L times (SolverSettings::max_sag) uses
+  /// mass_scale = L a2 / (1 + L a2), impulse_scale = 1 / (1 + L a2), bias_rate unchanged.
+  Real a2 = 0;
+  /// h omega^2 (1/s): the spring's stiffness per unit effective mass, times h. A row of
+  /// effective mass m carrying a steady impulse lambda per substep sags by
+  /// lambda / (m h omega^2) (derivation at stiffening()).
+  Real h_omega2 = 0;
 };
 
 /// Softness for a spring of `hertz` (Hz) and `damping_ratio` over a substep of h seconds.
@@ -96,6 +105,10 @@ struct ContactConstraintPoint {
   /// speculative contact stops the bodies before their surfaces meet, so the approach
   /// speed at the meeting is relative_velocity extrapolated over this gap.
   Real push_gap = 0;
+  /// Load stiffening of the normal row's spring (>= 1, dimensionless): its stiffness is
+  /// this many times the softness's (stiffening(), SolverSettings::max_sag); set by
+  /// prepare_contacts from the warm-start impulse.
+  Real stiffening = 1;
   std::uint32_t feature_id = 0;
 };
 
@@ -107,6 +120,10 @@ struct ContactConstraint {
   Vec3 tangent1 = Vec3::UnitX(), tangent2 = Vec3::UnitZ();
   Real friction = 0;
   Real restitution = 0;
+  /// The weight this contact carries (N), as estimated by its owner from the support
+  /// graph (World: what rests on what under gravity), for the load stiffening of its
+  /// normal rows (SolverSettings::max_sag); 0: none known, no stiffening.
+  Real load = 0;
   int count = 0;
   std::array<ContactConstraintPoint, 4> points{};
 };
@@ -142,7 +159,39 @@ struct SolverSettings {
   Real damping_ratio = 10;
   Real push_max = 3;             ///< m/s, largest bias velocity that resolves overlap
   Real restitution_threshold = 1;  ///< m/s, slower approaches do not bounce
+  /// Load-aware stiffness (m; 0 turns it off): a contact whose spring would sag more
+  /// than this under the weight it carries (ContactConstraint::load) is stiffened
+  /// until it sags this much (stiffening()). The spring's stiffness is its effective
+  /// mass times (2 pi hertz)^2: the mass of the two bodies at the contact, not of what
+  /// they carry, so a tall stack's lower contacts hold the weight of everything above
+  /// them on springs as soft as the top's, sag in proportion (a 30-box tower of unit
+  /// boxes: 17 cm in all), and hold the stack's tilt with those springs alone: the
+  /// stack buckles like an elastic column under its own weight once its height cubed
+  /// outgrows their stiffness (30 boxes at 36 Hz fall by step ~600). Stiffened, each
+  /// contact's stiffness follows its load (load / max_sag), so the resistance to
+  /// tilting grows with the weight that tilts it. The bias rate (how fast an overlap is
+  /// pushed out) is unchanged: a stiffened row is a rigid row with the spring's gentle
+  /// position correction, not a harder push. The load is the weight from the support
+  /// graph, not the impulse the contact carried: stiffness set from the impulse feeds
+  /// back on itself (a stiffer contact pushes harder, carries more, gets stiffer;
+  /// measured, a 20-box tower then rocks by up to 2.5 m). Lightly loaded contacts (a
+  /// box resting alone sags 0.07-0.4 mm at the defaults, whatever its size) keep their
+  /// softness.
+  Real max_sag = 0;
 };
+
+/// The stiffening factor (>= 1) of a normal row of effective mass `normal_mass` (kg)
+/// that carried `impulse` (N s) per substep, for max_sag (m). A soft row at rest (vn =
+/// 0) with penetration s changes its impulse by -m mass_scale bias_rate s -
+/// impulse_scale lambda, zero at s = -lambda / (m a2 bias_rate) = -lambda / (m h
+/// omega^2): that is the sag. Above max_sag the row's stiffness is multiplied by sag /
+/// max_sag (Softness::a2), which brings the sag down to max_sag. 1 where the row is
+/// rigid, carried nothing or max_sag is 0.
+inline Real stiffening(const Softness& soft, Real max_sag, Real normal_mass, Real impulse) {
+  if (!(max_sag > 0) || !(soft.h_omega2 > 0) || !(normal_mass > 0) || !(impulse > 0)) return 1;
+  const Real sag = impulse / (normal_mass * soft.h_omega2);
+  return sag > max_sag ? sag / max_sag : 1;
+}
 
 /// The anchors of point p at the bodies' current motion (dq since the step began): each
 /// moves as its body's centre of curvature at the point does (ContactConstraintPoint::ca_n),
@@ -205,9 +254,12 @@ enum class NormalRows : std::uint8_t {
 /// One Gauss-Seidel pass over every contact; `use_bias` adds the soft position bias.
 /// `reverse` visits the constraints last to first (the relax passes alternate, as
 /// WideContacts::solve's `reverse`).
+/// `centroid_rows` runs each manifold's centroid row before its point rows
+/// (kSequential only; centroid_row in contact_solver.cpp, WorldSettings::centroid_rows).
 void solve_contacts(std::vector<ContactConstraint>& cs, std::vector<BodyState>& states,
                     const ContactSoftness& soft, Real inv_h, Real push_max, bool use_bias,
-                    NormalRows normal_rows = NormalRows::kSequential, bool reverse = false);
+                    NormalRows normal_rows = NormalRows::kSequential, bool reverse = false,
+                    bool centroid_rows = true);
 /// Restitution pass after the substeps (Box2D v3 b2ApplyRestitution): each point that
 /// approached faster than `threshold` and pushed gets the normal velocity
 /// -restitution * v_impact, where v_impact is the approach speed at the substep it first
@@ -258,8 +310,13 @@ class WideContacts {
   /// what prepare_contacts computes for the scalar passes (each point's effective
   /// masses and approach velocity, from the states' masses and velocities) lane by
   /// lane, so `cs` needs no prepare_contacts; unpack writes the normal masses back.
+  /// `soft`, `max_sag` and the substep `h` (s) give each constraint's points their
+  /// stiffening (SolverSettings::max_sag) from its load, as prepare_contacts does; the
+  /// defaults leave every point at 1. `centroid_rows` prepares the centroid rows (each
+  /// set_motion then computes what they read); solve may run them only if it is set.
   void build(const std::vector<ContactConstraint>& cs, const std::vector<int>& order,
-             const std::vector<BodyState>& states, int dummy);
+             const std::vector<BodyState>& states, int dummy, const ContactSoftness& soft = {},
+             Real max_sag = 0, Real h = 0, bool centroid_rows = true);
   /// Reads the bodies' motion since the step began (dp, dq) from `states` and sets what
   /// the passes read of it: each point's anchors turned with the bodies
   /// (current_anchors), its separation now and its effective mass (row_mass). build()
@@ -272,8 +329,10 @@ class WideContacts {
   /// velocity changes back.
   void warm_start(std::vector<BodyState>& states);
   /// `reverse` visits the groups last to first (a backward Gauss-Seidel pass).
+  /// `centroid_rows`: each manifold's centroid row before its point rows, as
+  /// solve_contacts (only if build prepared them).
   void solve(std::vector<BodyState>& states, const ContactSoftness& soft, Real inv_h, Real push_max,
-             bool use_bias, bool reverse = false);
+             bool use_bias, bool reverse = false, bool centroid_rows = true);
   /// Writes impulses, max_normal_impulse, relative_velocity, push_gap and normal_mass
   /// back to `cs` (the constraints given to build), what apply_restitution reads.
   void unpack(std::vector<ContactConstraint>& cs) const;
@@ -286,6 +345,7 @@ class WideContacts {
     std::array<int, kLanes> row_a{}, row_b{};    ///< the bodies' rows in the solver's body array
     int points = 0;           ///< largest point count among the lanes
     bool friction = false;    ///< some lane has friction
+    bool stiffened = false;   ///< some point has stiffening > 1 (SolverSettings::max_sag)
     alignas(32) float inv_mass_a[kLanes] = {}, inv_mass_b[kLanes] = {};
     /// World inverse inertia at the step's start, symmetric: xx, yy, zz, xy, xz, yz.
     alignas(32) float ia[6][kLanes] = {}, ib[6][kLanes] = {};
@@ -295,6 +355,15 @@ class WideContacts {
     alignas(32) float fixed[kLanes] = {};
     /// The lane's point count (0 for a padding lane): points past it are padding.
     alignas(32) float count[kLanes] = {};
+    /// At the motion of the last set_motion, for the centroid row (solve), with rc_a,
+    /// rc_b the means of the points' current anchors (m, world frame, from the centres
+    /// of mass): rc_a x n and rc_b x n (m), and count^2 times the inverse effective
+    /// mass along n at the anchors (1/kg), the sum of the rows' couplings K_ij.
+    alignas(32) float cn_a[3][kLanes] = {}, cn_b[3][kLanes] = {};
+    alignas(32) float coupling[kLanes] = {};
+    /// ContactConstraintPoint::stiffening of the lane's points (one per constraint) and
+    /// its inverse.
+    alignas(32) float stiffening[kLanes] = {}, inv_stiffening[kLanes] = {};
     struct Point {
       alignas(32) float ra[3][kLanes] = {}, rb[3][kLanes] = {};
       /// ContactConstraintPoint::ca_n / cb_n.
@@ -332,6 +401,7 @@ class WideContacts {
   void store(std::vector<BodyState>& states) const;
 
   std::vector<Group> groups_;
+  bool centroid_rows_ = true;    ///< build's centroid_rows
   std::vector<int> source_;      ///< per group and lane: index into cs, or -1 for padding
   std::vector<Row> rows_;        ///< the solver's bodies
   std::vector<MotionRow> motion_;  ///< their motion, per row (set_motion)
