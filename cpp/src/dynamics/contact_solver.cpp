@@ -66,7 +66,10 @@ ContactSoftness contact_softness(const SolverSettings& s, Real h) {
   // The same cap (Box2D v3 lets the static spring reach twice it, half the substep
   // rate: measured, a 100 kg box on a 1 kg one on the ground at 60 Hz and 4 substeps
   // then pumps the light box out, 38 cm in 100 s; capped, it stands).
-  soft.fixed = make_softness(std::min(s.static_hertz_scale * hertz, cap), s.damping_ratio, h);
+  const Real fixed_hertz = std::min(s.static_hertz_scale * hertz, cap);
+  soft.fixed = make_softness(fixed_hertz, s.damping_ratio, h);
+  if (hertz > 0) soft.dynamic.max_stiffening = (cap / hertz) * (cap / hertz);
+  if (fixed_hertz > 0) soft.fixed.max_stiffening = (cap / fixed_hertz) * (cap / fixed_hertz);
   return soft;
 }
 
@@ -306,7 +309,7 @@ void centroid_row(ContactConstraint& c, BodyState& a, BodyState& b, const Softne
     if (s > 0) return;
     const Real mass = row_mass(p.normal_mass, effective_mass(a, b, ra[i], rb[i], n), turn_sin2(a, b));
     const Real kii = mass > 0 ? 1 / mass : 0;
-    const Real a_soft = p.stiffening > 1 ? p.stiffening * soft.a2 : soft.a2;
+    const Real a_soft = p.stiffening * soft.a2;
     const Real g = use_bias && a_soft > 0 ? kii / a_soft : 0;
     if (use_bias) sum_bias += std::max(soft.bias_rate * s, -push_max);
     sum_gl += g * p.normal_impulse;

@@ -344,7 +344,7 @@ WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, SoftLanes dyn,
       // impulse increment d at every point of the manifold that meets the rows'
       // targets on average, d = -(sum vn + sum bias + sum g l) / (sum K_ij + sum g),
       // before the point rows correct the rest. Lanes with fewer than two points or a
-      // speculative point (centroid_ok, set with the motion) are left out.
+      // speculative point (s > 0) are left out.
       const v8 cnt = ld(g.count);
       m8 ok = cnt > one;
       v8 sum = zero, sum_g = zero, min_l = splat(3.0e38f);
@@ -475,7 +475,6 @@ WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, SoftLanes dyn,
     scatter(g.row_b, b, rows);
   }
 }
-
 
 }  // namespace
 

@@ -84,10 +84,12 @@ struct WorldSettings {
   /// point the whole correction and its opposite point the reaction, a torque that
   /// rocks stacks. A 20-box tower of unit boxes then stands at the defaults (without:
   /// a box is 0.5 m off by step ~400, and it falls), and a stiff 30-box tower (8
-  /// substeps, 120 Hz) sways half as far. Off by default for its cost: about 15% of the
-  /// pyramid's step (1.81x PyBullet's speed with it, ~2.1x without; `wmo bench pyramid
-  /// --centroid-rows`). Towers of 30 boxes still buckle at 4 substeps either way: their
-  /// springs are too soft for their height (SolverSettings::max_sag).
+  /// substeps, 120 Hz) sways half as far. Off by default for its cost: a fifth more
+  /// time per pyramid step (measured, median of 3 runs of 600 steps: 44.6 against 37.1
+  /// ms, 1.76x PyBullet's speed instead of 2.17x; `wmo bench pyramid --engines
+  /// wmo,pybullet --repeats 3 [--centroid-rows]`). Towers of 30 boxes still buckle at 4
+  /// substeps either way: their springs are too soft for their height
+  /// (SolverSettings::max_sag).
   bool centroid_rows = false;
   SolverSettings solver{};
   /// Speculative margin at rest (unit: m): contacts are created for pairs closer than
