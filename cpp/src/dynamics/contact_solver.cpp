@@ -350,22 +350,20 @@ void solve_contacts(std::vector<ContactConstraint>& cs, std::vector<BodyState>& 
     const Vec3& n = c.normal;
     const Softness& soft = a.inv_mass == 0 || b.inv_mass == 0 ? softness.fixed : softness.dynamic;
     std::array<Vec3, kMaxPoints> anchor_a, anchor_b;  // current anchors, for the friction rows too
+    // Current anchors (turned with the bodies, see current_anchors).
+    for (int i = 0; i < c.count; ++i) current_anchors(a, b, c.points[i], n, anchor_a[i], anchor_b[i]);
     bool block_done = false;
-    if (normal_rows == NormalRows::kBlock && c.count >= 2) {
-      for (int i = 0; i < c.count; ++i) current_anchors(a, b, c.points[i], n, anchor_a[i], anchor_b[i]);
+    if (normal_rows == NormalRows::kBlock && c.count >= 2)
       block_done = solve_normal_block(c, a, b, soft, inv_h, push_max, use_bias, anchor_a, anchor_b);
-    }
-    if (!block_done) {
-      for (int i = 0; i < c.count; ++i) current_anchors(a, b, c.points[i], n, anchor_a[i], anchor_b[i]);
-      if (centroid_rows && c.count >= 2) centroid_row(c, a, b, soft, push_max, use_bias, anchor_a, anchor_b);
-    }
+    if (!block_done && centroid_rows && c.count >= 2)
+      centroid_row(c, a, b, soft, push_max, use_bias, anchor_a, anchor_b);
     for (int ii = 0; ii < c.count && !block_done; ++ii) {
       // A backward pass visits the points backward too (symmetric Gauss-Seidel within
       // the manifold as across the constraints).
       const int i = reverse ? c.count - 1 - ii : ii;
       ContactConstraintPoint& p = c.points[i];
       // Current separation from the bodies' motion since the step began, at the current
-      // anchors (turned with the bodies, see current_anchors).
+      // anchors.
       const Vec3& ra = anchor_a[i];
       const Vec3& rb = anchor_b[i];
       const Real s = separation_now(a, b, p, n, ra, rb);
