@@ -113,7 +113,8 @@ struct ContactConstraintPoint {
   Real push_gap = 0;
   /// Load stiffening of the normal row's spring (>= 1, dimensionless): its stiffness is
   /// this many times the softness's (stiffening(), SolverSettings::max_sag); set by
-  /// prepare_contacts from the warm-start impulse.
+  /// prepare_contacts from its constraint's load (ContactConstraint::load), the same
+  /// for every point of the constraint.
   Real stiffening = 1;
   std::uint32_t feature_id = 0;
 };
