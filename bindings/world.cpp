@@ -251,13 +251,17 @@ ccd : the world switch for continuous collision detection (default True); each b
     than its allowance is put back at that time, an impulse stops the approach there,
     and the potential energy the move back gains comes out of its kinetic energy, so
     CCD never adds energy. CCD belongs to the fast body: a fast non-CCD body can pass
-    through a slow CCD one. The ``ccd`` stage of ``profile`` counts the bodies swept,
-    ``ccd_hits`` those put back.
+    through a slow CCD one. Last, a contact pair of a CCD body that may have ended the
+    step overlapping by more than the allowance (a corner that swung in within the
+    step: the solver's rows only see the points of the step's start) is collided again
+    at the end poses and pushed back to half the allowance, its approach stopped. The
+    ``ccd`` stage of ``profile`` counts the bodies swept, ``ccd_hits`` those put back,
+    ``ccd_projections`` the overlaps pushed apart.
 ccd_motion_threshold : a CCD body is swept only in steps where its points move more
     than this fraction of its inner radius (half-thickness; default 0.5): slower
     bodies take the ordinary path. 0 sweeps every CCD body every step.
-ccd_penetration : how far a swept body may overlap another before it is put back, as a
-    fraction of its inner radius (default 0.05).
+ccd_penetration : how far a CCD body may overlap another before it is put back or
+    pushed apart, as a fraction of its inner radius (default 0.05).
 
 State arrays (world.positions, orientations, linear_velocities, angular_velocities)
 are zero-copy, writable views; see the module notes on their lifetime.
@@ -495,6 +499,9 @@ field; the world is unchanged. Existing state views may detach (see World).
                              "The continuous collision detection switch (see World).")
       .def_property_readonly("ccd_hits", &World::ccd_hit_count,
                              "Bodies the last step's ccd stage put back at a time of impact.")
+      .def_property_readonly("ccd_projections", &World::ccd_projection_count,
+                             "Overlaps the last step's ccd stage pushed apart (contact pairs of CCD "
+                             "bodies left deeper than their allowance).")
       .def_property_readonly(
           "awake",
           [](const World& w) {
