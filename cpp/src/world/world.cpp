@@ -1640,8 +1640,9 @@ int World::project_ccd_overlaps() {
   // The contacts (indices into constraints_) to check: an overlap at the end is at most
   // the one at the start plus how far the two bodies' points moved relative to each
   // other, and the projection acts only on one that deepened by more than a quarter of
-  // the allowance, so a resting contact's steady sag (a thin body's allowance may be
-  // smaller than it) is left to the solver.
+  // the allowance, or one deeper than kFastCap allowances (if a body of the pair is
+  // fast), so a resting contact's steady sag (a thin body's allowance may be smaller
+  // than it) is left to the solver.
   std::vector<int>& pairs = ccd_overlap_pairs_;
   pairs.clear();
   const int m = static_cast<int>(constraints_.size());
