@@ -254,7 +254,9 @@ ccd : the world switch for continuous collision detection (default True); each b
     through a slow CCD one. Last, a contact pair of a CCD body that may have ended the
     step overlapping by more than the allowance (a corner that swung in within the
     step: the solver's rows only see the points of the step's start) is collided again
-    at the end poses and pushed back to half the allowance, its approach stopped. The
+    at the end poses: an overlap the step deepened past the allowance is pushed back to
+    half of it, and a moving pair (faster than the sleep threshold: a column
+    decelerating, a pile crushed) is held to 1.5 allowances, its approach stopped. The
     ``ccd`` stage of ``profile`` counts the bodies swept, ``ccd_hits`` those put back,
     ``ccd_projections`` the overlaps pushed apart.
 ccd_motion_threshold : a CCD body is swept only in steps where its points move more
@@ -534,7 +536,10 @@ field; the world is unchanged. Existing state views may detach (see World).
       .def_property_readonly("contact_count", &World::contact_point_count,
                              "Contact points of the last step.")
       .def_property_readonly("max_penetration", &World::max_penetration,
-                             "Deepest penetration among the last step's contact points (m).")
+                             "Deepest overlap (m, 0 if none) of the last step's contact pairs, "
+                             "collided again at the bodies' current poses (one narrowphase pass over "
+                             "the pairs per read; the ``contacts`` depths are the step's manifold "
+                             "points moved with their bodies, which miss a corner that swung in).")
       .def("kinetic_energy", &World::kinetic_energy, "Kinetic energy of the dynamic bodies (J).")
       .def_property_readonly(
           "contacts",

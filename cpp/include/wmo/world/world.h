@@ -163,12 +163,14 @@ struct WorldSettings {
   ///     collided again at the end poses; one deeper than the allowance that grew by
   ///     more than a quarter of it in the step is pushed back to half of it (or to
   ///     its depth at the start), and one deeper than 1.5 allowances while a body of
-  ///     the pair is fast (a decelerating column) back to that depth: along the
-  ///     normal (translation, shared by inverse mass), its approach stopped by an
-  ///     impulse and the potential energy the push gains taken out of the kinetic
-  ///     energy (world.cpp, project_ccd_overlaps). boxes3000 with CCD on every box:
-  ///     0.39-0.52 m -> 0.09-0.12 m deepest overlap (four runs, positions perturbed
-  ///     by 1e-7 m).
+  ///     the pair moves (faster than sleep_linear_threshold: a decelerating column,
+  ///     a pile crushed by what lands on it) back to that depth: along the normal
+  ///     (translation, shared by inverse mass), its approach stopped by an impulse
+  ///     at the manifold's centroid and the potential energy the push gains taken
+  ///     out of the kinetic energy, in rounds over the contacts of the bodies pushed
+  ///     (world.cpp, project_ccd_overlaps). A resting pair's sag stays the solver's.
+  ///     boxes3000 with CCD on every box: 0.39-0.52 m -> 0.076-0.092 m deepest
+  ///     overlap (six runs, positions perturbed by 1e-7 m).
   ///  A fast non-CCD dynamic body can still pass through a slow CCD body: CCD belongs
   ///  to the body that moves fast.
   bool enable_ccd = true;
@@ -181,8 +183,9 @@ struct WorldSettings {
   /// Penetration a swept CCD body may reach before it is put back, as a fraction of
   /// its inner radius (dimensionless, > 0): it is put back where it overlaps by between
   /// a quarter and a half of this (a contact then exists for the next step); a contact
-  /// pair of a CCD body left overlapping by more than this is pushed back to half of
-  /// it (overlap projection, 4. above). 0.05 on a box of half-extent 1 is 5 cm.
+  /// pair of a CCD body that the step left overlapping by more than this is pushed
+  /// back to half of it, and a moving pair's overlap is held to 1.5 times it (overlap
+  /// projection, 4. above). 0.05 on a box of half-extent 1 is 5 cm.
   Real ccd_penetration = 0.05;
   /// Broadphase fattening (unit: m): a body moves its proxy only when its box leaves
   /// the box fattened by this much.
@@ -364,7 +367,10 @@ class World {
   int contact_point_count() const;
   /// Manifolds of the last step reused from the cache (WorldSettings::manifold_reuse_distance).
   long long reused_manifold_count() const { return reused_manifolds_; }
-  /// Largest penetration depth among the last step's contact points (m), 0 if none.
+  /// Deepest overlap (m, 0 if none) of the last step's contact pairs, collided again
+  /// at the bodies' current poses (a narrowphase pass over the pairs per call; see
+  /// world.cpp): the geometry's overlap, not contacts()' depths, which are the step's
+  /// manifold points moved with their bodies.
   Real max_penetration() const;
 
   /// Per-stage profile of the last step (and accumulated), in kStageNames order.
