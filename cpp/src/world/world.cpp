@@ -1619,8 +1619,10 @@ int World::project_ccd_overlaps() {
   // 0.091 m at 64 (the cap for pairs faster than the sleep threshold, impulses at the
   // manifold's centroid; 0.085 and 0.092 m in two runs more). Columns need the rounds: a push hands half its depth to the
   // next pair, so a column of n boxes settles over ~n rounds, each round's work only
-  // the contacts of the bodies the last one pushed (the ccd stage: 1.31 ms a step at
-  // 16, 1.32 at 64, 1.74 at 1000; 600 steps, one run each).
+  // the contacts of the bodies the last one pushed (the ccd stage over 600 steps, one
+  // run each, with a variant of the cap that also pushed slow pairs deeper than 1 cm:
+  // 1.31 ms a step at 16 rounds, 1.32 at 64, 1.74 at 1000; with this rule at 64, 1.35
+  // ms, benchmarks/ccd/run.py).
   constexpr Real kFastCap = 1.5;
   // How far each body's points moved over the step: its centre of mass, and its turn
   // times its bounding radius (states_: bodies in contact have their step's motion).
