@@ -54,6 +54,20 @@ void swap_remove(V& v, int i) {
   v.pop_back();
 }
 
+/// Compressed rows (CSR) over keys 0..n-1: `emit(add)` calls add(key, value) once per
+/// entry; it is run twice, to count and then to fill, and must add the same entries in
+/// the same order both times. Row i is then entries[start[i] .. start[i + 1]), in the
+/// order its entries were added. `fill` is scratch. The buffers keep their capacity.
+template <class Emit>
+void build_rows(int n, std::vector<int>& start, std::vector<int>& entries, std::vector<int>& fill, Emit&& emit) {
+  start.assign(n + 1, 0);
+  emit([&](int key, int) { ++start[key + 1]; });
+  for (int i = 0; i < n; ++i) start[i + 1] += start[i];
+  entries.resize(start[n]);
+  fill.assign(start.begin(), start.end() - 1);
+  emit([&](int key, int value) { entries[fill[key]++] = value; });
+}
+
 }  // namespace
 
 CombineRule combine_rule_from_string(const std::string& s, const char* field) {
@@ -1365,14 +1379,10 @@ void World::estimate_loads() {
   if (load_bodies_.empty()) return;
   // The contacts by supported body (CSR), and the supported bodies from the top down
   // (ties by index: deterministic).
-  load_start_.assign(n + 1, 0);
-  for (int k = 0; k < m; ++k)
-    if (load_upper_[k] >= 0) ++load_start_[load_upper_[k] + 1];
-  for (int i = 0; i < n; ++i) load_start_[i + 1] += load_start_[i];
-  load_contacts_.resize(load_start_[n]);
-  load_fill_.assign(load_start_.begin(), load_start_.end() - 1);
-  for (int k = 0; k < m; ++k)
-    if (load_upper_[k] >= 0) load_contacts_[load_fill_[load_upper_[k]]++] = k;
+  build_rows(n, load_start_, load_contacts_, load_fill_, [&](auto&& add) {
+    for (int k = 0; k < m; ++k)
+      if (load_upper_[k] >= 0) add(load_upper_[k], k);
+  });
   std::sort(load_bodies_.begin(), load_bodies_.end(), [&](int x, int y) {
     const Real hx = positions_[x].dot(up), hy = positions_[y].dot(up);
     return hx > hy || (hx == hy && x < y);
@@ -1411,18 +1421,12 @@ int World::build_shock_order() {
     }
   if (!any) return 0;
   // Adjacency of the contact graph (CSR).
-  shock_adjacency_start_.assign(n + 1, 0);
-  for (const ContactConstraint& c : constraints_) {
-    ++shock_adjacency_start_[c.body_a + 1];
-    ++shock_adjacency_start_[c.body_b + 1];
-  }
-  for (int i = 0; i < n; ++i) shock_adjacency_start_[i + 1] += shock_adjacency_start_[i];
-  shock_adjacency_.resize(static_cast<std::size_t>(2) * m);
-  shock_fill_.assign(shock_adjacency_start_.begin(), shock_adjacency_start_.end() - 1);
-  for (const ContactConstraint& c : constraints_) {
-    shock_adjacency_[shock_fill_[c.body_a]++] = c.body_b;
-    shock_adjacency_[shock_fill_[c.body_b]++] = c.body_a;
-  }
+  build_rows(n, shock_adjacency_start_, shock_adjacency_, shock_fill_, [&](auto&& add) {
+    for (const ContactConstraint& c : constraints_) {
+      add(c.body_a, c.body_b);
+      add(c.body_b, c.body_a);
+    }
+  });
   // Depth of support: 0 for static and kinematic bodies, else 1 + the least depth
   // among the bodies it touches (breadth first, in index order: deterministic).
   constexpr int kUnsupported = std::numeric_limits<int>::max();
@@ -1672,21 +1676,12 @@ int World::project_ccd_overlaps() {
   // The contacts of each body (CSR over the step's constraints).
   std::vector<int>& start = ccd_pair_start_;
   std::vector<int>& adjacent = ccd_adjacent_pairs_;
-  start.assign(n + 1, 0);
-  for (const ContactConstraint& c : constraints_) {
-    ++start[c.body_a + 1];
-    ++start[c.body_b + 1];
-  }
-  for (int i = 0; i < n; ++i) start[i + 1] += start[i];
-  adjacent.resize(start[n]);
-  {
-    std::vector<int>& fill = ccd_pair_fill_;
-    fill.assign(start.begin(), start.end() - 1);
+  build_rows(n, start, adjacent, ccd_pair_fill_, [&](auto&& add) {
     for (int ci = 0; ci < m; ++ci) {
-      adjacent[fill[constraints_[ci].body_a]++] = ci;
-      adjacent[fill[constraints_[ci].body_b]++] = ci;
+      add(constraints_[ci].body_a, ci);
+      add(constraints_[ci].body_b, ci);
     }
-  }
+  });
   ccd_pushed_.resize(n, Vec3::Zero());
   for (const int i : ccd_pushed_rows_) ccd_pushed_[i].setZero();
   ccd_pushed_rows_.clear();
