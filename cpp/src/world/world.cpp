@@ -1621,9 +1621,9 @@ int World::project_ccd_overlaps() {
   // the cap at 4 rounds, 0.11-0.15 m with it at 4, 0.09-0.12 m at 16 (the cap for
   // pairs faster than the restitution threshold, impulses at the deepest point), 0.076-
   // 0.091 m at 64 (the cap for pairs faster than the sleep threshold, impulses at the
-  // manifold's centroid; 0.085 and 0.092 m in two runs more). Columns need the rounds: a push hands half its depth to the
-  // next pair, so a column of n boxes settles over ~n rounds, each round's work only
-  // the contacts of the bodies the last one pushed (the ccd stage over 600 steps, one
+  // manifold's centroid; 0.085 and 0.092 m in two runs more). Columns need the rounds:
+  // a push hands half its depth to the next pair, so a column of n boxes settles over
+  // ~n rounds, each round's work only the contacts of the bodies the last one pushed (the ccd stage over 600 steps, one
   // run each, with a variant of the cap that also pushed slow pairs deeper than 1 cm:
   // 1.31 ms a step at 16 rounds, 1.32 at 64, 1.74 at 1000; with this rule at 64, 1.35
   // ms, benchmarks/ccd/run.py).
@@ -1655,9 +1655,9 @@ int World::project_ccd_overlaps() {
   // The contacts (indices into constraints_) to check: an overlap at the end is at most
   // the one at the start plus how far the two bodies' points moved relative to each
   // other, and the projection acts only on one that deepened by more than a quarter of
-  // the allowance, or one deeper than kFastCap allowances (if a body of the pair is
-  // fast), so a resting contact's steady sag (a thin body's allowance may be smaller
-  // than it) is left to the solver.
+  // the allowance, or one deeper than kFastCap allowances (if a body of the pair moves,
+  // checked on the collided depth below), so a resting contact's steady sag (a thin
+  // body's allowance may be smaller than it) is left to the solver.
   std::vector<int>& pairs = ccd_overlap_pairs_;
   pairs.clear();
   const int m = static_cast<int>(constraints_.size());
@@ -1832,7 +1832,6 @@ int World::continuous_step() {
     reach_others = std::max(reach_others, reach);
   }
 
-  auto allowance_of = [&](int i) { return ccd_allowance(i); };
   // Sweeps body a (sweep sa) against body b moving by mb over the step, whose points
   // move at most reach_b: a may make no overlap with b deeper than half its allowance,
   // nor deepen one it starts with by more than a quarter of it. Returns the first time
@@ -1908,7 +1907,7 @@ int World::continuous_step() {
       if (has_filters_ && !collides(slot_of_[s1.body], slot_of_[s2.body])) continue;
       sweep_pairs_.emplace_back(order[k], order[l]);
       const PairHit h =
-          sweep_pair(s1, s2.body, s2.motion, s2.reach, std::min(allowance_of(s1.body), allowance_of(s2.body)));
+          sweep_pair(s1, s2.body, s2.motion, s2.reach, std::min(ccd_allowance(s1.body), ccd_allowance(s2.body)));
       record(s1, h, s2.body, false);
       record(s2, h, s1.body, true);
     }
@@ -1919,7 +1918,7 @@ int World::continuous_step() {
   // solver put them in).
   for (Sweep& sw : sweeps_) {
     const int i = sw.body;
-    const Real allowance = allowance_of(i);
+    const Real allowance = ccd_allowance(i);
     broadphase_->query_aabb(sw.box.fattened(reach_others), [&](ProxyId id) {
       const int j = slots_[static_cast<int>(broadphase_->user_data(id))].index;
       if (j == i || sweep_of_[j] >= 0) return true;  // itself, or swept above
@@ -1961,7 +1960,7 @@ int World::continuous_step() {
         if (!(now[other] < seen[other])) continue;  // the other was not put back last round
         Motion mo;
         mo.start = sweeps_[other].motion.at(now[other]);
-        const PairHit h = sweep_pair(sweeps_[me], sweeps_[other].body, mo, 0, allowance_of(sweeps_[me].body));
+        const PairHit h = sweep_pair(sweeps_[me], sweeps_[other].body, mo, 0, ccd_allowance(sweeps_[me].body));
         changed = record(sweeps_[me], h, sweeps_[other].body, false) || changed;
       }
     }
