@@ -25,7 +25,7 @@
 //
 // Separation is decided first, by GJK (gjk_distance with cull = margin): its lower
 // bound v.w / |v| (van den Bergen) proves a distance beyond the margin, and such a pair
-// returns at once. Separated pairs are most of a broadphase's candidates, and the SAT
+// returns at once. Separated pairs are common among a broadphase's candidates; the SAT
 // proves their separation only once it reaches a separating axis, often an edge pair
 // near the end. A separated pair of polytopes always has a separating face or edge
 // axis, so for margin 0 the verdict is the SAT's own (up to round-off at touching).

@@ -52,10 +52,10 @@ bool collide_supported(ShapeType a, ShapeType b);
 // y = -h / +h and 2 for its side, and for a box the Voronoi region code
 // sum_i t_i 3^i (t_i = 0 inside the slab of axis i, 1 at +h_i, 2 at -h_i);
 // collide_plane.cpp documents the plane-convex ids. collide_box_box and
-// collide_hull_hull (SAT with a bias towards face axes, clipping, <= 4 points) use
-// their own ids: a face contact encodes (reference face, incident face, clip vertex),
-// an edge contact the pair of edges (bit 31 set); the layout is in
-// collision/clip.h. Their depth along a face axis may exceed the exact minimum
+// collide_hull_hull (SAT with a bias towards face axes, clipping, <= 4 points;
+// hull-hull decides separation by GJK first) use their own ids: a face contact
+// encodes (reference face, incident face, clip vertex), an edge contact the pair of
+// edges (bit 31 set); the layout is in collision/clip.h. Their depth along a face axis may exceed the exact minimum
 // translation distance by up to 5% + 1e-5 * size (the face bias keeps stacks from
 // flipping between face and edge contacts). ----
 bool collide_sphere_sphere(const Sphere& a, const Sphere& b, const Pose& b_in_a, Real margin, Manifold& m);
