@@ -201,8 +201,11 @@ bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_i
   const Real reach = a.radius() + b.radius() + margin;  // hulls have no radius today
   // ---- Separation first, by GJK (see the header): a pair it proves farther apart than
   // `reach` has no contact, and the SAT below is not needed.
-  const Vec3 guess = b_in_a.transform_point(b.vertex_centroid()) - a.vertex_centroid();
-  if (gjk_distance(CoreSupport<ConvexHull>(a), CoreSupport<ConvexHull>(b), b_in_a, GjkSettings{}, guess, reach)
+  // B's vertex centroid in A's frame: GJK's first direction here, the pruning bound of
+  // A's face queries below.
+  const Vec3 centroid_b = b_in_a.transform_point(b.vertex_centroid());
+  if (gjk_distance(CoreSupport<ConvexHull>(a), CoreSupport<ConvexHull>(b), b_in_a, GjkSettings{},
+                   centroid_b - a.vertex_centroid(), reach)
           .culled)
     return false;
   const Mat3 R = b_in_a.matrix();
@@ -238,7 +241,6 @@ bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_i
   // best is <= reach, or it would have), so its support search is skipped: most faces
   // then cost two dot products instead of V_B. Results are unchanged.
   const Real prune_slack = kPruneSlack * (size + b_in_a.position.norm());
-  const Vec3 centroid_b = b_in_a.transform_point(b.vertex_centroid());
   Vec3 deepest_b = centroid_b;
   Real sep_a = -kInf;
   int face_a = 0;

@@ -55,9 +55,9 @@ bool collide_supported(ShapeType a, ShapeType b);
 // collide_hull_hull (SAT with a bias towards face axes, clipping, <= 4 points;
 // hull-hull decides separation by GJK first) use their own ids: a face contact
 // encodes (reference face, incident face, clip vertex), an edge contact the pair of
-// edges (bit 31 set); the layout is in collision/clip.h. Their depth along a face axis may exceed the exact minimum
-// translation distance by up to 5% + 1e-5 * size (the face bias keeps stacks from
-// flipping between face and edge contacts). ----
+// edges (bit 31 set); the layout is in collision/clip.h. Their depth along a face
+// axis may exceed the exact minimum translation distance by up to 5% + 1e-5 * size
+// (the face bias keeps stacks from flipping between face and edge contacts). ----
 bool collide_sphere_sphere(const Sphere& a, const Sphere& b, const Pose& b_in_a, Real margin, Manifold& m);
 bool collide_sphere_box(const Sphere& a, const Box& b, const Pose& b_in_a, Real margin, Manifold& m);
 bool collide_sphere_capsule(const Sphere& a, const Capsule& b, const Pose& b_in_a, Real margin, Manifold& m);
