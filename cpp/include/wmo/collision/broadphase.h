@@ -159,6 +159,16 @@ class Broadphase {
     dirty_ = true;
     on_move(id, displacement);
   }
+  /// move_proxy_unchecked for `count` proxies at once: ids[k] gets the tight box
+  /// boxes[k] and the displacement displacements[k]. The same result as the calls one
+  /// by one, with one virtual call for the batch (the world moves every awake body's
+  /// proxy every step: 10,000 falling spheres spent 8 ns a body in the per-proxy calls
+  /// and the tree's scattered leaves).
+  void move_proxies_unchecked(const ProxyId* ids, const Aabb* boxes, const Vec3* displacements, int count) {
+    for (int k = 0; k < count; ++k) tight_[static_cast<std::size_t>(ids[k])] = boxes[k];
+    dirty_ = true;
+    on_move_batch(ids, displacements, count);
+  }
 
   /// Finishes incremental work after a batch of create/destroy/move calls (re-sorting,
   /// candidate-pair update). query_pairs calls it itself when needed.
@@ -219,6 +229,10 @@ class Broadphase {
   /// Called before the id is released (aabb(id) is still readable).
   virtual void on_destroy(ProxyId id) = 0;
   virtual void on_move(ProxyId id, const Vec3& displacement) = 0;
+  /// on_move for each of `count` proxies, in order (their tight boxes already set).
+  virtual void on_move_batch(const ProxyId* ids, const Vec3* displacements, int count) {
+    for (int k = 0; k < count; ++k) on_move(ids[k], displacements[k]);
+  }
   virtual void on_update() = 0;
   /// Fills `out` (already cleared) as query_pairs specifies; called after on_update().
   virtual void on_query_pairs(std::vector<ProxyPair>& out) = 0;

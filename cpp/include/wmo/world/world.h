@@ -456,6 +456,10 @@ class World {
   /// One substep of h seconds for the bodies in coupled_ (velocities: dynamic ones).
   void integrate_velocities(Real h);
   void integrate_positions(Real h);
+  /// All `substeps` substeps of step h for the bodies [begin, end), each a plain free
+  /// body (awake, dynamic, in no contact, gravity only, centre of mass at its origin,
+  /// no gyroscopic term), in place on the state arrays.
+  void integrate_plain_run(int begin, int end, Real h, int substeps);
   /// One substep of awake dynamic body i, working state s, flags f.
   void integrate_velocity(int i, BodyState& s, std::uint8_t f, Real h) const;
   /// One substep of awake (dynamic or kinematic) body i; its centre of mass moves by
@@ -536,6 +540,7 @@ class World {
     kComOffset = 8,    ///< centre of mass away from the body origin (trait)
     kGyroscopic = 16,  ///< gyroscopic term on and anisotropic inertia
     kIsotropic = 32,   ///< inertia a multiple of the identity (trait)
+    kSphere = 64,      ///< the shape is a Sphere: its world box is centre +- radius (trait)
   };
   std::vector<std::uint8_t> traits_;
   // CCD, per dense row: the flag (BodyDef::ccd), the shape's inner radius and its
