@@ -447,3 +447,23 @@ def test_max_penetration_is_the_overlap_of_the_contact_pairs_at_the_current_pose
         assert w.max_penetration == pytest.approx(expected, abs=1e-12)
         unseen = max(unseen, w.max_penetration - float(np.max(w.contacts["depth"], initial=0.0)))
     assert unseen > 0.05, unseen  # measured 0.105 m (0.254 against 0.149 m)
+
+
+def test_a_body_that_overflows_during_step_n_raises_and_the_world_goes_on():
+    # validate_state checks the state step() is given; a velocity that overflows a
+    # position within the call (1.7e308 m/s: the substep's mean velocity is inf) is
+    # refused by the next step's broadphase update, naming the body, before the tree
+    # sees an infinite box. Body 70 is in the second chunk of 64 boxes the update
+    # hands over together: the bodies before it are moved, and after the state is
+    # repaired the world steps on, finding the pair the repair made.
+    w = wmo.World(gravity=(0, -10, 0), sleeping=False)
+    for k in range(70):
+        w.add_body(wmo.Sphere(0.1), position=(3.0 * k, 0, 0))
+    w.add_body(wmo.Sphere(0.1), position=(0, 5, 0), linear_velocity=(0, 1.7e308, 0))
+    with pytest.raises(ValueError, match=r"body 70 left the finite range \(position \(0, inf, 0\)"):
+        w.step(2)
+    w.positions[70] = (0.15, w.positions[0][1], 0)  # overlapping body 0
+    w.linear_velocities[70] = w.linear_velocities[0]
+    w.step()
+    assert np.isfinite(w.positions).all()
+    assert {tuple(sorted(p)) for p in w.contacts["bodies"].tolist()} == {(0, 70)}

@@ -348,7 +348,7 @@ class AabbTreeBroadphase final : public Broadphase {
     fat_[static_cast<std::size_t>(n.proxy())] = box;
   }
 
-  void move_one(ProxyId id, const Vec3& displacement) {
+  [[gnu::always_inline]] void move_one(ProxyId id, const Vec3& displacement) {
     const auto i = static_cast<std::size_t>(id);
     const Aabb& t = tight(id);
     const Aabb& old_fat = fat_[i];

@@ -995,45 +995,66 @@ void World::run_step() {
     StageTimer t(profile_[kUpdateBroadphase]);
     const Real motion = settings_.speculative_motion * dt;
     const Real ccd_motion = std::max(settings_.speculative_motion, Real(1)) * dt;
-    // Boxes in chunks, each handed to the broadphase in one call.
+    // Boxes in chunks, each handed to the broadphase in one call. The arrays are read
+    // through local pointers: through `this` they were reloaded after every store to
+    // a box (which might alias them).
     constexpr int kChunk = 64;
     std::array<ProxyId, kChunk> ids;
+    std::array<int, kChunk> body;
     std::array<Aabb, kChunk> boxes;
     std::array<Vec3, kChunk> moves;
     int count = 0;
+    Real finite = 0;  // 0 while every box of the chunk is finite, NaN after one is not
+    const Vec3* const pos = positions_.data();
+    const Quat* const ori = orientations_.data();
+    const Vec3* const vel = linear_velocities_.data();
+    const std::uint8_t* const awake = awake_.data();
+    const std::uint8_t* const traits = traits_.data();
+    const std::shared_ptr<const Shape>* const shapes = shapes_.data();
+    const ProxyId* const proxies = proxies_.data();
     auto flush = [&] {
-      broadphase_->move_proxies_unchecked(ids.data(), boxes.data(), moves.data(), count);
-      moved += count;
+      int good = count;
+      if (finite != 0) [[unlikely]] {
+        // A non-finite box (a velocity blown up by a previous step of this call: step()
+        // validated the state it was given) is refused here, as move_proxy would,
+        // before the tree sees it; the bodies before it are moved, as one by one.
+        good = 0;
+        while (boxes[good].min.allFinite() && boxes[good].max.allFinite()) ++good;
+      }
+      broadphase_->move_proxies_unchecked(ids.data(), boxes.data(), moves.data(), good);
+      moved += good;
+      if (good < count) {
+        const int i = body[good];
+        throw InvalidArgument("body " + std::to_string(i) + " left the finite range (position " +
+                              to_string(positions_[i]) + ", velocity " + to_string(linear_velocities_[i]) + ")");
+      }
       count = 0;
+      finite = 0;
     };
     for (int i = 0; i < n; ++i) {
-      if (!awake_[i]) continue;  // static or sleeping: the proxy stays where it is
+      if (!awake[i]) continue;  // static or sleeping: the proxy stays where it is
       // The box swept by the step's predicted translation (speculative_motion, and all
       // of it for a CCD body, and for a kinematic body while CCD is active: its motion
       // is known, and a fast one would otherwise jump over a resting CCD body), so that
       // the pairs of surfaces that can meet within the step are reported.
-      const Vec3& v = linear_velocities_[i];
+      const Vec3 v = vel[i];
       const bool sweep_all = ccd && (ccd_[i] || kinds_[i] == BodyKind::kKinematic);
       const Vec3 d = (sweep_all ? ccd_motion : motion) * v;
       Aabb& box = boxes[count];
-      if (traits_[i] & kSphere) {  // Sphere::world_aabb without the call
-        const Real r = static_cast<const Sphere&>(*shapes_[i]).radius();
-        box.min = (positions_[i].array() - r) - spec;
-        box.max = (positions_[i].array() + r) + spec;
+      if (traits[i] & kSphere) {  // Sphere::world_aabb without the call
+        const Real r = static_cast<const Sphere&>(*shapes[i]).radius();
+        box.min = (pos[i].array() - r) - spec;
+        box.max = (pos[i].array() + r) + spec;
       } else {
-        box = shapes_[i]->world_aabb(Pose(positions_[i], orientations_[i])).fattened(spec);
+        box = shapes[i]->world_aabb(Pose(pos[i], ori[i])).fattened(spec);
       }
       box.min += d.cwiseMin(Vec3::Zero());
       box.max += d.cwiseMax(Vec3::Zero());
-      // The proxy is the body's own and min <= max by construction; a non-finite box
-      // (a velocity blown up by a previous step of this call: step() validated the
-      // state it was given) is refused here, as move_proxy would, before the tree sees it.
-      if (!box.min.allFinite() || !box.max.allFinite()) [[unlikely]] {
-        flush();  // the bodies before it are moved, as one by one
-        throw InvalidArgument("body " + std::to_string(i) + " left the finite range (position " +
-                              to_string(positions_[i]) + ", velocity " + to_string(v) + ")");
-      }
-      ids[count] = proxies_[i];
+      // The proxy is the body's own and min <= max by construction; x - x is 0 for a
+      // finite x and NaN otherwise (flush finds the body).
+      finite += ((box.min - box.min) + (box.max - box.max)).sum();
+      ids[count] = proxies[i];
+      body[count] = i;
       moves[count] = dt * v;
       if (++count == kChunk) flush();
     }
