@@ -1,7 +1,8 @@
 """What accuracy costs in time (issue 3, section 6): each accuracy knob of the world (time
 step, substeps, velocity iterations, contact margins growing with the approach
 (speculative_motion for every pair, speculative_motion_static for pairs with fixed
-geometry), manifold reuse tolerance, contact spring stiffness, block-solved manifolds)
+geometry), manifold reuse tolerance, contact spring stiffness, block-solved manifolds,
+the energy guard's added relax passes)
 swept one at a time from the defaults (dt 1/60 s, 4 substeps, 1 iteration, motion margins
 0 and 1, reuse 1 mm, 36 Hz contacts, rows one by one) on cases with a
 known answer, measuring the error against the
@@ -16,6 +17,10 @@ Cases (the error is in metres or a relative number, as stated):
   stack10  10 unit boxes stacked face to face, 5 s: the largest displacement of a box
            centre (m; a standing stack stays at the millimetre level).
   pyramid10  the SCENES.md pyramid with 10 layers (385 boxes), 5 s: the same measure.
+  energy   20 spheres and 20 boxes fired around a closed box of static walls, no gravity,
+           friction, restitution or damping, 10 s: the largest one-step rise of the
+           kinetic energy, relative (inelastic contacts should only remove energy; WMO
+           only: the peers' defaults are not such a closed system).
 
 Writes results/accuracy/accuracy.csv (one row per engine, case and setting) and one PNG
 per case (error against cost, one series per engine and knob; a peer that is not
@@ -40,7 +45,7 @@ G = 10.0
 BUDGET_S = 60.0
 DEFAULT = {"dt": 1 / 60, "substeps": 4, "iterations": 1, "speculative_motion": 0.0,
            "speculative_motion_static": 1.0, "manifold_reuse_distance": 1e-3, "contact_hertz": 36.0,
-           "block_solver": False}
+           "block_solver": False, "energy_guard_passes": 0}
 SWEEPS = {
     "dt": [1 / 30, 1 / 60, 1 / 120, 1 / 240, 1 / 480, 1 / 960],
     "substeps": [1, 2, 4, 8, 16],
@@ -58,6 +63,8 @@ SWEEPS = {
     "contact_hertz": [15.0, 30.0, 36.0, 45.0, 60.0],
     # Each manifold's normal rows solved together (a small LCP per pair, scalar solver).
     "block_solver": [False, True],
+    # Relax passes added where a substep's contact solve left more energy than it found.
+    "energy_guard_passes": [0, 8],
 }
 KNOBS = list(SWEEPS)
 
@@ -126,8 +133,22 @@ def case_pyramid(s, layers=10):
     return ms, float(np.linalg.norm(w.positions - p0, axis=1).max())
 
 
+def case_energy(s):
+    w = scenes.closed_box(**world_settings(s))
+    state = {"e": w.kinetic_energy(), "rise": 0.0}
+
+    def watch(_):
+        e = w.kinetic_energy()
+        state["rise"] = max(state["rise"], (e - state["e"]) / state["e"])
+        state["e"] = e
+
+    ms, _ = run_for(w, 10.0, s["dt"], watch)
+    return ms, state["rise"]
+
+
 CASES = {"bounce": (case_bounce, "relative error of e^2 h"), "slide": (case_slide, "stopping distance error (m)"),
-         "stack10": (case_stack, "largest displacement (m)"), "pyramid10": (case_pyramid, "largest displacement (m)")}
+         "stack10": (case_stack, "largest displacement (m)"), "pyramid10": (case_pyramid, "largest displacement (m)"),
+         "energy": (case_energy, "largest one-step energy rise (relative)")}
 
 
 def main() -> None:

@@ -27,7 +27,7 @@ import numpy as np
 
 from . import _core
 
-__all__ = ["BoxScene", "boxes3000", "boxes3000_spec", "build", "ground_box", "mixed_pile",
+__all__ = ["BoxScene", "boxes3000", "boxes3000_spec", "build", "closed_box", "ground_box", "mixed_pile",
            "pyramid", "pyramid_spec", "tower", "SCENES", "SPECS"]
 
 #: The ground of both canonical scenes: a static box of half-extents 250 x 50 x 250
@@ -144,6 +144,31 @@ def tower(height: int = 30, half_extent: float = 0.5, friction: float = 0.6,
     box = _core.Box((half_extent,) * 3)
     for k in range(height):
         world.add_body(box, position=(0.0, half_extent * (2 * k + 1), 0.0), friction=mu)
+    return world
+
+
+def closed_box(count: int = 40, seed: int = 5, **world_kwargs: Any) -> _core.World:
+    """A closed system for energy tests: ``count`` bodies (alternately boxes of
+    half-extents 0.3 x 0.25 x 0.35 and spheres of radius 0.3, density 1000) on a 2 m
+    grid, fired with random velocities (3 m/s and 1 rad/s per component, standard
+    normal, from ``seed``) around a closed container of static walls (inside 10 x 10 x
+    10 m), with no gravity, friction or restitution; ``sleeping`` is off. With no
+    damping nothing may add kinetic energy: the contacts are inelastic."""
+    if not 1 <= count <= 50:
+        raise ValueError(f"count must be in [1, 50], got {count}")
+    world_kwargs.setdefault("gravity", (0.0, 0.0, 0.0))
+    world_kwargs.setdefault("sleeping", False)
+    world = _world(world_kwargs)
+    for x, z, hx, hz in ((5.5, 0, 0.5, 6), (-5.5, 0, 0.5, 6), (0, 5.5, 6, 0.5), (0, -5.5, 6, 0.5)):
+        world.add_body(_core.Box((hx, 6, hz)), position=(x, 0, z), kind="static", friction=0.0)
+    for y in (-5.5, 5.5):
+        world.add_body(_core.Box((6, 0.5, 6)), position=(0, y, 0), kind="static", friction=0.0)
+    rng = np.random.default_rng(seed)
+    for i in range(count):
+        shape = _core.Sphere(0.3) if i % 2 else _core.Box((0.3, 0.25, 0.35))
+        world.add_body(shape, position=(-4 + 2 * (i % 5), -4 + 2 * ((i // 5) % 5), -3 + 2 * (i // 25)),
+                       linear_velocity=rng.normal(size=3) * 3, angular_velocity=rng.normal(size=3),
+                       friction=0.0)
     return world
 
 

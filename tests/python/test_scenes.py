@@ -104,3 +104,15 @@ def test_world_settings_pass_through():
     w = scenes.pyramid(layers=2, dt=1 / 120, substeps=8)
     assert w.dt == pytest.approx(1 / 120) and w.substeps == 8
     assert math.isclose(len(w), 1 + 4 + 1)
+
+
+def test_closed_box_is_a_closed_system():
+    # Six static walls and 40 moving bodies, no gravity, friction or sleeping: what the
+    # energy tests and the accuracy benchmark's energy case need.
+    w = scenes.closed_box()
+    assert w.body_count == 46
+    assert np.all(np.asarray(w.settings["gravity"]) == 0)
+    assert not w.settings["sleeping"]
+    assert w.kinetic_energy() > 100
+    with pytest.raises(ValueError, match="count"):
+        scenes.closed_box(count=0)

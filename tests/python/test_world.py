@@ -160,6 +160,9 @@ def test_bad_body_raises_and_adds_nothing(kwargs, field):
     (dict(dt=0.0), "dt"), (dict(dt=float("nan")), "dt"), (dict(substeps=0), "substeps"),
     (dict(iterations=-1), "iterations"), (dict(gravity=(0, float("nan"), 0)), "gravity"),
     (dict(friction_combine="median"), "median"), (dict(threads=0), "threads"),
+    (dict(energy_guard_passes=-1), "energy_guard_passes"),
+    (dict(energy_guard_tolerance=float("nan")), "energy_guard_tolerance"),
+    (dict(energy_guard_tolerance=-1e-6), "energy_guard_tolerance"),
 ])
 def test_bad_settings_raise(kwargs, field):
     with pytest.raises(ValueError, match=field):

@@ -33,7 +33,7 @@ __all__ = ["EditError", "SceneModel", "OPS", "SETTINGS", "SCENE_BUILDERS", "regi
 #: capped at 1000 (a scene is shared: one edit must not stall its thread).
 SETTINGS: dict[str, type] = {
     "gravity": list, "dt": float, "substeps": int, "iterations": int, "relax_iterations": int,
-    "block_solver": bool, "centroid_rows": bool,
+    "energy_guard_passes": int, "energy_guard_tolerance": float, "block_solver": bool, "centroid_rows": bool,
     "contact_hertz": float, "contact_damping_ratio": float, "contact_push_max": float,
     "contact_static_hertz_scale": float, "contact_max_sag": float,
     "restitution_threshold": float, "speculative_distance": float, "speculative_motion": float,
