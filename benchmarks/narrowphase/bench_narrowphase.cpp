@@ -29,6 +29,9 @@
 //                   special routines where it has them: sphere-sphere, sphere-box,
 //                   sphere-capsule, box-box; its libccd-based GJK/EPA otherwise,
 //                   gjk_tolerance 1e-6 by default).
+//   fcl_gjk_epa     FCL's own generic GJK and EPA (fcl::detail, GJKSolver_indep's
+//                   generic path) on every pair, closed-form pairs included: one
+//                   contact, the depth (reference_adapters.h, fcl_gjk_epa_depth).
 // libccd's callbacks call WMO's support functions through a virtual call and a pose
 // transform per support point; that is how any user would plug shapes into libccd.
 //
@@ -308,6 +311,12 @@ int main(int argc, char** argv) {
            return r.intersecting ? -r.signed_distance : NAN;
          },
          true},
+        {"fcl_gjk_epa",
+         [&](Case& c) {
+           auto r = ref::fcl_gjk_epa_depth(c.fa, c.fb);
+           return r.intersecting ? -r.signed_distance : NAN;
+         },
+         true},
     };
     const char* only_methods = std::getenv("WMO_BENCH_METHODS");
     for (const Method& m : methods) {
@@ -384,6 +393,11 @@ int main(int argc, char** argv) {
             {"fcl",
              [&](Case& c) {
                auto r = ref::fcl_collide_depth(c.fa, c.fb, tol);
+               return r.intersecting ? -r.signed_distance : NAN;
+             }},
+            {"fcl_gjk_epa",
+             [&](Case& c) {
+               auto r = ref::fcl_gjk_epa_depth(c.fa, c.fb, tol);
                return r.intersecting ? -r.signed_distance : NAN;
              }},
         };

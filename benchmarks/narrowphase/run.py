@@ -23,12 +23,13 @@ from collections import defaultdict
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
-METHODS = ["wmo_special", "wmo_gjk_epa", "wmo_gjk_epa_point", "libccd_gjk_epa", "libccd_mpr", "fcl"]
+METHODS = ["wmo_special", "wmo_gjk_epa", "wmo_gjk_epa_point", "libccd_gjk_epa", "libccd_mpr", "fcl", "fcl_gjk_epa"]
 RATIOS = [
     ("wmo_special", "libccd_gjk_epa"),
     ("wmo_special", "fcl"),
     ("wmo_gjk_epa", "libccd_gjk_epa"),
     ("wmo_gjk_epa", "fcl"),
+    ("wmo_gjk_epa", "fcl_gjk_epa"),
 ]
 
 
@@ -95,7 +96,7 @@ def print_tables(rows: list[dict[str, str]]) -> None:
 
 # The references' own default tolerances (libccd's epa_tolerance, FCL's gjk_tolerance):
 # the points of the sweep at which "equal accuracy" is judged.
-PEER_DEFAULTS = {"libccd_gjk_epa": 1e-4, "fcl": 1e-6}
+PEER_DEFAULTS = {"libccd_gjk_epa": 1e-4, "fcl": 1e-6, "fcl_gjk_epa": 1e-6}
 
 # Errors below this (m) are round-off of the 0.05..2 m shapes (a few ulp of 1 m is
 # 1e-15; 1e-12 leaves room for a few hundred operations) and compare as equal, so an
@@ -197,7 +198,7 @@ def plot_sweep(rows: list[dict[str, str]], path: Path) -> None:
 
     pairs = list(dict.fromkeys(r["pair"] for r in rows))
     methods = list(dict.fromkeys(r["method"] for r in rows))
-    markers = {"wmo_gjk_epa": "o", "libccd_gjk_epa": "s", "libccd_mpr": "^", "fcl": "D"}
+    markers = {"wmo_gjk_epa": "o", "libccd_gjk_epa": "s", "libccd_mpr": "^", "fcl": "D", "fcl_gjk_epa": "v"}
     ncol = min(len(pairs), 5)
     nrow = (len(pairs) + ncol - 1) // ncol
     fig, axes = plt.subplots(nrow, ncol, figsize=(4.2 * ncol, 4.0 * nrow), squeeze=False)

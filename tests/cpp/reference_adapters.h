@@ -192,6 +192,34 @@ inline RefResult fcl_collide_depth(const FclObject& a, const FclObject& b, doubl
   return r;
 }
 
+/// FCL's own generic GJK and EPA (fcl::detail::GJK, EPA on a MinkowskiDiff, as
+/// GJKSolver_indep runs them for a pair it has no special routine for), called
+/// directly so that they answer every pair, those FCL's collide() hands to its closed
+/// forms (sphere-box, box-box, ...) included: the like-for-like peer of WMO's GJK/EPA.
+/// One contact, the depth only (FCL 0.7 leaves this path's normal in shape 1's frame);
+/// `tolerance` is GJK's and EPA's (GJKSolver_indep's defaults: 1e-6, and 128
+/// iterations, 128 faces, 64 vertices, 255 EPA iterations).
+inline RefResult fcl_gjk_epa_depth(const FclObject& a, const FclObject& b, double tolerance = 1e-6) {
+  const auto* s1 = static_cast<const fcl::ShapeBased*>(a.geometry.get());
+  const auto* s2 = static_cast<const fcl::ShapeBased*>(b.geometry.get());
+  const fcl::Transform3d& tf1 = a.object->getTransform();
+  const fcl::Transform3d& tf2 = b.object->getTransform();
+  fcl::detail::MinkowskiDiff<double> shape;
+  shape.shapes[0] = s1;
+  shape.shapes[1] = s2;
+  shape.toshape1.noalias() = tf2.linear().transpose() * tf1.linear();
+  shape.toshape0 = tf1.inverse(Eigen::Isometry) * tf2;
+  const fcl::Vector3d guess(1, 0, 0);
+  fcl::detail::GJK<double> gjk(128, tolerance);
+  RefResult r;
+  if (gjk.evaluate(shape, -guess) != fcl::detail::GJK<double>::Inside) return r;
+  fcl::detail::EPA<double> epa(128, 64, 255, tolerance);
+  if (epa.evaluate(gjk, -guess) == fcl::detail::EPA<double>::Failed) return r;
+  r.intersecting = true;
+  r.signed_distance = -epa.depth;
+  return r;
+}
+
 // =====================================================================================
 // libccd
 // =====================================================================================
