@@ -380,6 +380,12 @@ int main(int argc, char** argv) {
         const ccd_t cc = ref::make_ccd(tol, tol);
         const std::pair<const char*, Query> sweep_methods[] = {
             {"wmo_gjk_epa", [&](Case& c) { return wmo_generic_depth(c, out, s); }},
+            {"wmo_gjk_epa_point",
+             [&](Case& c) {
+               const DistanceResult r = penetration_convex_convex(
+                   *c.cfg.a, *c.cfg.b, c.cfg.pose_a.relative(c.cfg.pose_b), s.gjk, s.epa);
+               return r.intersecting ? -r.distance : NAN;
+             }},
             {"libccd_gjk_epa",
              [&](Case& c) {
                auto r = ref::ccd_penetration_gjk(c.ca, c.cb, cc);

@@ -6,7 +6,8 @@ each method computes and how the error reference is chosen), which writes
 narrowphase.csv, tolerance_sweep.csv and reference_check.csv into --out, then writes
 narrowphase_time.png (ns/query per pair and method, log scale) and tolerance_sweep.png
 (depth error against ns/query as the GJK/EPA tolerance varies, log-log), and
-matched_accuracy.csv (WMO's GJK/EPA against libccd and FCL at equal or better accuracy,
+matched_accuracy.csv (WMO's GJK/EPA, manifold and one-contact, against libccd and FCL at
+equal or better accuracy,
 from the sweep).
 
 Usage: .venv/bin/python benchmarks/narrowphase/run.py --out results/narrowphase
@@ -97,6 +98,9 @@ def print_tables(rows: list[dict[str, str]]) -> None:
 # The references' own default tolerances (libccd's epa_tolerance, FCL's gjk_tolerance):
 # the points of the sweep at which "equal accuracy" is judged.
 PEER_DEFAULTS = {"libccd_gjk_epa": 1e-4, "fcl": 1e-6, "fcl_gjk_epa": 1e-6}
+# WMO's methods in the sweep: the manifold (GJK, EPA, clipping) and the one-contact
+# answer that libccd's and FCL's GJK/EPA give (the like-for-like comparison).
+WMO_SWEPT = ["wmo_gjk_epa", "wmo_gjk_epa_point"]
 
 # Errors below this (m) are round-off of the 0.05..2 m shapes (a few ulp of 1 m is
 # 1e-15; 1e-12 leaves room for a few hundred operations) and compare as equal, so an
@@ -106,9 +110,9 @@ ROUND_OFF = 1e-12
 
 
 def matched_accuracy(sweep: list[dict[str, str]]) -> list[dict[str, object]]:
-    """WMO's GJK/EPA against each reference at equal or better accuracy.
+    """WMO's GJK/EPA (each of WMO_SWEPT) against each reference at equal or better accuracy.
 
-    For every pair and reference, on the sweep's overlapping configurations: the
+    For every pair, WMO method and reference, on the sweep's overlapping configurations: the
     reference at its default tolerance, and the loosest WMO tolerance whose median
     error, max error and wrong verdicts are all no worse (errors below ROUND_OFF count
     as equal; the loosest, not the
@@ -117,31 +121,32 @@ def matched_accuracy(sweep: list[dict[str, str]]) -> list[dict[str, object]]:
     """
     out: list[dict[str, object]] = []
     pairs = list(dict.fromkeys(r["pair"] for r in sweep))
-    for pair in pairs:
+    for pair, wmo_method, (peer, tol) in ((p, m, d) for p in pairs for m in WMO_SWEPT for d in PEER_DEFAULTS.items()):
         rows = [r for r in sweep if r["pair"] == pair]
-        wmo = [r for r in rows if r["method"] == "wmo_gjk_epa"]
-        for peer, tol in PEER_DEFAULTS.items():
-            ref = [r for r in rows if r["method"] == peer and math.isclose(num(r["tolerance"]), tol, rel_tol=1e-6)]
-            if not ref:
-                continue
-            ref_row = ref[0]
-            r_med, r_max = num(ref_row["median_error"]), num(ref_row["max_error"])
-            r_wrong = int(ref_row.get("n_wrong_verdict") or 0)
-            ok = [w for w in wmo
-                  if num(w["median_error"]) <= max(r_med, ROUND_OFF)
-                  and num(w["max_error"]) <= max(r_max, ROUND_OFF)
-                  and int(w.get("n_wrong_verdict") or 0) <= r_wrong]
-            best = max(ok, key=lambda w: num(w["tolerance"])) if ok else None
-            out.append({
-                "pair": pair, "reference": peer, "reference_tolerance": tol,
-                "reference_ns": num(ref_row["ns_per_query"]), "reference_median_error": r_med,
-                "reference_max_error": r_max,
-                "wmo_tolerance": num(best["tolerance"]) if best else math.nan,
-                "wmo_ns": num(best["ns_per_query"]) if best else math.nan,
-                "wmo_median_error": num(best["median_error"]) if best else math.nan,
-                "wmo_max_error": num(best["max_error"]) if best else math.nan,
-                "time_ratio": (num(best["ns_per_query"]) / num(ref_row["ns_per_query"])) if best else math.nan,
-            })
+        wmo = [r for r in rows if r["method"] == wmo_method]
+        if not wmo:
+            continue
+        ref = [r for r in rows if r["method"] == peer and math.isclose(num(r["tolerance"]), tol, rel_tol=1e-6)]
+        if not ref:
+            continue
+        ref_row = ref[0]
+        r_med, r_max = num(ref_row["median_error"]), num(ref_row["max_error"])
+        r_wrong = int(ref_row.get("n_wrong_verdict") or 0)
+        ok = [w for w in wmo
+              if num(w["median_error"]) <= max(r_med, ROUND_OFF)
+              and num(w["max_error"]) <= max(r_max, ROUND_OFF)
+              and int(w.get("n_wrong_verdict") or 0) <= r_wrong]
+        best = max(ok, key=lambda w: num(w["tolerance"])) if ok else None
+        out.append({
+            "pair": pair, "wmo_method": wmo_method, "reference": peer, "reference_tolerance": tol,
+            "reference_ns": num(ref_row["ns_per_query"]), "reference_median_error": r_med,
+            "reference_max_error": r_max,
+            "wmo_tolerance": num(best["tolerance"]) if best else math.nan,
+            "wmo_ns": num(best["ns_per_query"]) if best else math.nan,
+            "wmo_median_error": num(best["median_error"]) if best else math.nan,
+            "wmo_max_error": num(best["max_error"]) if best else math.nan,
+            "time_ratio": (num(best["ns_per_query"]) / num(ref_row["ns_per_query"])) if best else math.nan,
+        })
     return out
 
 
@@ -149,11 +154,11 @@ def print_matched(rows: list[dict[str, object]], path: Path) -> None:
     print("\nEqual accuracy (overlapping configurations of the sweep): the reference at its default"
           "\ntolerance against the loosest WMO GJK/EPA tolerance with no worse median error, max error"
           "\nand verdicts. ratio < 1: WMO faster.")
-    print(f"  {'pair':<18}{'reference':<16}{'ref ns':>9}{'ref med err':>12}{'ref max err':>12}"
+    print(f"  {'pair':<18}{'wmo method':<19}{'reference':<16}{'ref ns':>9}{'ref med err':>12}{'ref max err':>12}"
           f"{'wmo tol':>9}{'wmo ns':>9}{'wmo med err':>12}{'wmo max err':>12}{'ratio':>7}")
     for r in rows:
         ratio = r["time_ratio"]
-        print(f"  {r['pair']:<18}{r['reference']:<16}{fmt_ns(r['reference_ns']):>9}"
+        print(f"  {r['pair']:<18}{r['wmo_method']:<19}{r['reference']:<16}{fmt_ns(r['reference_ns']):>9}"
               f"{fmt_err(r['reference_median_error']):>12}{fmt_err(r['reference_max_error']):>12}"
               f"{('-' if math.isnan(r['wmo_tolerance']) else format(r['wmo_tolerance'], '.0e')):>9}"
               f"{fmt_ns(r['wmo_ns']):>9}{fmt_err(r['wmo_median_error']):>12}{fmt_err(r['wmo_max_error']):>12}"
@@ -198,7 +203,8 @@ def plot_sweep(rows: list[dict[str, str]], path: Path) -> None:
 
     pairs = list(dict.fromkeys(r["pair"] for r in rows))
     methods = list(dict.fromkeys(r["method"] for r in rows))
-    markers = {"wmo_gjk_epa": "o", "libccd_gjk_epa": "s", "libccd_mpr": "^", "fcl": "D", "fcl_gjk_epa": "v"}
+    markers = {"wmo_gjk_epa": "o", "wmo_gjk_epa_point": "P", "libccd_gjk_epa": "s", "libccd_mpr": "^", "fcl": "D",
+               "fcl_gjk_epa": "v"}
     ncol = min(len(pairs), 5)
     nrow = (len(pairs) + ncol - 1) // ncol
     fig, axes = plt.subplots(nrow, ncol, figsize=(4.2 * ncol, 4.0 * nrow), squeeze=False)
