@@ -736,8 +736,8 @@ void World::integrate_position(int i, BodyState& s, std::uint8_t f, Real h, cons
     // the sphere |M| = |L| (the energy gradient I^-1 M less its part along M), two
     // Newton steps, and R1 turned in the body frame by the rotation taking the moved
     // M onto R1's (C, with R = R1 C, so R^T L = C^T R1^T L is the moved M). L stays
-    // exact, E is kept to rounding, the orientation moves by the size of the energy
-    // error (1e-7 rad a substep at most in the tests' spins). Where M is nearly a
+    // exact, E is kept to rounding, and the orientation turns by an angle of the
+    // order of the relative energy error (the midpoint rule's). Where M is nearly a
     // principal axis the gradient has no part along the sphere and E is stationary
     // there: an error within round-off (1e-13 E) is left, a step larger than
     // 1e-3 |M| is not taken, nor one that does not reduce the error.
@@ -1380,9 +1380,8 @@ void World::run_step() {
           // Until the energy is back (to the tolerance), the cap, or a pass that takes
           // nothing out: then what is left is not the passes' to remove (the anchors
           // turned between the biased passes and these, see energy_guard_passes).
-          // The passes go in forward-backward pairs, as the relax passes do (an odd
-          // pass out biases the solution towards the rows it visits last: measured, a
-          // load-stiffened 30-box tower drifted 4.6 cm instead of 3.0).
+          // The passes go in forward-backward pairs, as the relax passes do
+          // (symmetric Gauss-Seidel: no bias towards the rows visited last).
           Real e = coupled_energy();
           for (int extra = 0; extra + 2 <= settings_.energy_guard_passes && e > e_free * (1 + guard_tol);
                extra += 2) {

@@ -81,8 +81,8 @@ struct WorldSettings {
   /// anchors turn with the bodies between the biased and the relax passes, and what
   /// that leaves (about 1e-9 of the energy a substep in the tests) is not theirs to
   /// remove. Costs one energy sum over the bodies in contact a substep, and the passes
-  /// (boxes3000: about 0.2 ms of a 3.5 ms solve stage, 958 passes in 600 steps, deepest
-  /// overlap 0.048 -> 0.038 m). Off by default: the converged relax passes it adds
+  /// (boxes3000: about 0.2 ms of a 3.5 ms solve stage, 1142 passes in 600 steps, deepest
+  /// overlap 0.048 -> 0.033 m). Off by default: the converged relax passes it adds
   /// while a tall stack settles set a load-stiffened 30-box tower (contact_max_sag,
   /// 8 substeps) swaying by 6.8 cm where it sways by 1.5 cm without them. 8 is the
   /// value the energy tests use.
