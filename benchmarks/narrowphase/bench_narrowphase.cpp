@@ -98,6 +98,12 @@ struct Case {
 /// Outcome of one query: NaN depth = "no contact reported".
 using Query = std::function<double(Case&)>;
 
+/// wmo_gjk_epa_point: penetration_convex_convex's one contact, depth (NAN if apart).
+double wmo_point_depth(const Case& c, const CollideSettings& s) {
+  const DistanceResult r = penetration_convex_convex(*c.cfg.a, *c.cfg.b, c.cfg.pose_a.relative(c.cfg.pose_b), s.gjk, s.epa);
+  return r.intersecting ? -r.distance : NAN;
+}
+
 #ifdef WMO_BENCH_STANDIN
 // Stand-in while wmo::collide's box-box, hull-hull and generic routines are not linked
 // yet (build with -DWMO_BENCH_STANDIN): special = the pair routine in A's frame,
@@ -123,10 +129,7 @@ double wmo_special_depth(const PairSpec& p, Case& c, std::vector<Manifold>&) {
 bool special_available(const PairSpec& p) {
   return p.has_special && p.a != ShapeType::kBox && p.a != ShapeType::kConvexHull;
 }
-double wmo_generic_depth(Case& c, std::vector<Manifold>&, const CollideSettings& s) {
-  const DistanceResult r = penetration_convex_convex(*c.cfg.a, *c.cfg.b, c.cfg.pose_a.relative(c.cfg.pose_b), s.gjk, s.epa);
-  return r.intersecting ? -r.distance : NAN;
-}
+double wmo_generic_depth(Case& c, std::vector<Manifold>&, const CollideSettings& s) { return wmo_point_depth(c, s); }
 constexpr bool kStandin = true;
 #else
 double wmo_special_depth(const PairSpec&, Case& c, std::vector<Manifold>& out) {
@@ -286,13 +289,7 @@ int main(int argc, char** argv) {
     const Method methods[] = {
         {"wmo_special", [&](Case& c) { return wmo_special_depth(p, c, out); }, special_available(p)},
         {"wmo_gjk_epa", [&](Case& c) { return wmo_generic_depth(c, out, generic); }, true},
-        {"wmo_gjk_epa_point",
-         [&](Case& c) {
-           const DistanceResult r = penetration_convex_convex(*c.cfg.a, *c.cfg.b, c.cfg.pose_a.relative(c.cfg.pose_b),
-                                                              generic.gjk, generic.epa);
-           return r.intersecting ? -r.distance : NAN;
-         },
-         true},
+        {"wmo_gjk_epa_point", [&](Case& c) { return wmo_point_depth(c, generic); }, true},
         {"libccd_gjk_epa",
          [&](Case& c) {
            auto r = ref::ccd_penetration_gjk(c.ca, c.cb, ccd_default);
@@ -380,12 +377,7 @@ int main(int argc, char** argv) {
         const ccd_t cc = ref::make_ccd(tol, tol);
         const std::pair<const char*, Query> sweep_methods[] = {
             {"wmo_gjk_epa", [&](Case& c) { return wmo_generic_depth(c, out, s); }},
-            {"wmo_gjk_epa_point",
-             [&](Case& c) {
-               const DistanceResult r = penetration_convex_convex(
-                   *c.cfg.a, *c.cfg.b, c.cfg.pose_a.relative(c.cfg.pose_b), s.gjk, s.epa);
-               return r.intersecting ? -r.distance : NAN;
-             }},
+            {"wmo_gjk_epa_point", [&](Case& c) { return wmo_point_depth(c, s); }},
             {"libccd_gjk_epa",
              [&](Case& c) {
                auto r = ref::ccd_penetration_gjk(c.ca, c.cb, cc);
