@@ -23,8 +23,11 @@
 //     the clip lost the deepest point (clip::kDeepestPointTolerance). Edge axis: one
 //     point, the closest points of the two edges.
 //
-// Separation is decided first, by GJK (gjk_distance with cull = margin): its lower
-// bound v.w / |v| (van den Bergen) proves a distance beyond the margin, and such a pair
+// Separation is decided first. Two balls around the vertex centroids settle the easy
+// pairs in a few flops: outer balls (ConvexHull::outer_radius) farther apart than the
+// margin prove the hulls are, inner balls (inner_radius) that overlap prove the hulls
+// overlap. The rest go to GJK (gjk_distance with cull = margin): its lower bound
+// v.w / |v| (van den Bergen) proves a distance beyond the margin, and such a pair
 // returns at once. Separated pairs are common among a broadphase's candidates; the SAT
 // proves their separation only once it reaches a separating axis, often an edge pair
 // near the end. A separated pair of polytopes always has a separating face or edge
@@ -33,43 +36,43 @@
 // but whose distance exceeds it (corner against corner) no longer yields speculative
 // points, as CollideSettings::margin says. Pairs GJK does not prove apart
 // (overlapping, within the margin, or within its 1e-10 relative tolerance of it) go
-// on to the SAT, which decides; they pay for the GJK run. Measured on the narrowphase
-// benchmark's hull_hull pairs (bench_narrowphase, 2000 configurations, interleaved
-// runs): barely separated 3.8 -> 1.7 us, far 0.73 -> 0.47 us, overlapping about 1 us
-// more (11-12 -> 12-13 us), the mean over the four classes 8.05 -> 7.84 us.
+// on to the SAT, which decides; they pay for the GJK run.
 //
 // Feature ids: clip::face_contact_id / clip::edge_contact_id (clip.h) with hull face
 // indices (faces()) and edge indices (edges()).
 //
 // Cost: O(F_A V_B + F_B V_A) for the face queries (less with hill-climbing support),
-// then for each edge of B a walk over A's Gauss map along its arc (see the edge
+// then for each edge of B, unless a bound rules it out (edge_bound: its axes cannot
+// beat the best face axis), a walk over A's Gauss map along its arc (see the edge
 // queries): Gauss-map tests on the edges around the few vertices of A it passes,
 // instead of on all E_A edges (brute force only for degenerate arcs). Scratch
 // arrays live in a per-thread workspace that keeps its capacity (no allocation once
 // warm); ConvexHull is final, so its calls are direct. For hulls up to 32 vertices
-// the support searches run on coordinate arrays (VertexSoA, vectorised, same vertex
-// as ConvexHull::support_index), A's face queries skip faces whose cheap upper bound
-// cannot win (exact pruning, kPruneSlack), B's skip the transform of the support point
-// likewise. The edge records, the rings of edges around each vertex and the vertex
-// centroid are the hull's own (ConvexHull::edge_arcs, vertex_edges, vertex_centroid,
-// built once at construction): rebuilding them per call (an edge index per half-edge,
-// a leaving half-edge per vertex) and following half-edge links was about half of the
-// edge queries' time. Measured (20-vertex hulls, deep overlaps, the same pair
-// repeated): 5.3 -> 2.4-3.2 us a call, bit-identical results. With a different pair
-// of hulls every call (the narrowphase benchmark's 4000 configurations, ~10 KB of
-// hull data read per call, out of cache) it stays ~10 us; prefetching every array of
-// both hulls at entry did not change that.
+// the support searches run on coordinate arrays (detail::support_index_soa, vectorised,
+// the same vertex as ConvexHull::support_index), A's face queries skip faces whose
+// cheap upper bound cannot win (exact pruning, kPruneSlack), B's skip the transform of
+// the support point likewise. The edge records, the rings of edges around each vertex
+// and the vertex centroid are the hull's own (ConvexHull::edge_arcs, vertex_edges,
+// vertex_centroid, built once at construction). All the pruning is exact: the results
+// are bit-identical to the unpruned test.
+//
+// Measured on the narrowphase benchmark's hull_hull pairs (20-vertex hulls, 4000
+// configurations, a different pair of hulls every call, out of cache;
+// `WMO_BENCH_BY_CLASS=1 WMO_BENCH_METHODS=wmo_special,fcl bench_narrowphase out 4000
+// hull_hull`): deep overlaps 12.0 -> 4.1 us, barely separated 1.1 -> 1.2, far
+// 0.24 -> 0.09, the mean of the four classes 6.6 -> 2.7 us (FCL 2.2). Of that, the edge
+// bound took the deep overlaps' Gauss-map tests from 139 to 5 a call, the
+// centroid balls skip GJK for about half of the deep overlaps and answer most far
+// pairs, and touch_hull's upfront loads overlap the cache misses.
 
 #include <cmath>
 #include <vector>
-#ifdef __SSE2__
-#include <emmintrin.h>
-#endif
 
 #include "clip.h"
 #include "manifold_reduce.h"
 #include "wmo/collision/narrowphase.h"
 #include "wmo/geometry/gjk.h"
+#include "wmo/geometry/support_soa.h"
 
 namespace wmo {
 namespace {
@@ -89,6 +92,41 @@ inline bool is_minkowski_face(const Vec3& a, const Vec3& b, const Vec3& bxa, con
   const Real cba = c.dot(bxa), dba = d.dot(bxa);
   const Real adc = a.dot(dxc), bdc = b.dot(dxc);
   return cba * dba < 0 && adc * bdc < 0 && cba * bdc > 0;
+}
+
+/// Upper bound on the separation along every axis an edge of B can form with edges of
+/// A (A's frame). The edge runs through q0; c, d are the negated outward normals of its
+/// two faces; sep_c, sep_d those faces' separations; p_c, p_d A's support vertices along
+/// c and d. The edge's candidate axes are the unit vectors n on the arc from c to d, and
+/// for each, B's support along -n lies on the edge, so the separation is
+/// n.q0 - h_A(n) with h_A A's support function. Along m(t) = (1 - t) c + t d, t in
+/// [0, 1], S(t) = m.q0 - h_A(m) is concave (h_A is convex) with S(0) = sep_c,
+/// S(1) = sep_d, and its slopes at the ends are at most (d - c).(q0 - p_c) and
+/// (c - d).(q0 - p_d) (p_c lies in A's support set along c, so the directional derivative
+/// of h_A there is at least p_c.(d - c)). A concave function lies below its tangents, so
+/// S(t) <= min(sep_c + t k0, sep_d + (1 - t) k1), whose largest value on [0, 1] is at an
+/// end or where the two lines cross. The separation is S(t) / |m(t)| with
+/// |m(t)| in [sqrt((1 + c.d) / 2), 1]: a positive bound is divided by that. Exact up
+/// to round-off (the caller subtracts kPruneSlack * its scale); +inf when the faces are
+/// back to back within round-off (c.d near -1).
+inline Real edge_bound(Real sep_c, Real sep_d, const Vec3& c, const Vec3& d, const Vec3& q0,
+                       const Vec3& p_c, const Vec3& p_d) {
+  const Vec3 dc = d - c;
+  const Real k0 = dc.dot(q0 - p_c);
+  const Real k1 = -dc.dot(q0 - p_d);
+  // f1(t) = sep_c + t k0, f2(t) = sep_d + (1 - t) k1.
+  Real m = std::max(std::min(sep_c, sep_d + k1), std::min(sep_c + k0, sep_d));
+  // min(f1, f2) is concave: its maximum is at an end or at the crossing t* of the
+  // lines, f1(t*) = f2(t*), where f1 - f2 = gap + t slope vanishes.
+  const Real slope = k0 + k1;
+  const Real gap = sep_c - sep_d - k1;
+  if (slope != 0) {
+    const Real t_star = -gap / slope;
+    if (t_star > 0 && t_star < 1) m = std::max(m, sep_c + t_star * k0);
+  }
+  if (m <= 0) return m;
+  const Real h = 0.5 * (1 + c.dot(d));
+  return h > 1e-12 ? m / std::sqrt(h) : kInf;
 }
 
 /// Vertices of face f of hull h, moved by `pose` (A's frame), at most
@@ -127,63 +165,57 @@ constexpr Real kPruneSlack = 1e-9;
 constexpr std::size_t kBruteSupportMax = 32;
 
 /// A hull's vertices as three coordinate arrays (ConvexHull::vertex_coords), so the
-/// face queries' dot products over all vertices vectorise (the brute-force support of
-/// ConvexHull::support_index handles one vertex at a time behind a data-dependent
-/// branch, and was two thirds of this routine's time for 20-vertex hulls). `dots` is
-/// the scratch for one direction.
+/// face queries' dot products over all vertices vectorise (detail::support_index_soa;
+/// a scalar scan behind a data-dependent branch was two thirds of this routine's time
+/// for 20-vertex hulls).
 struct VertexSoA {
   int n = 0;
   const Real *x = nullptr, *y = nullptr, *z = nullptr;
-  std::vector<Real> dots;
   void assign(const ConvexHull& h) {
     n = static_cast<int>(h.vertices().size());
     x = h.vertex_coords().data();
     y = x + n;
     z = y + n;
-    if (static_cast<int>(dots.size()) < n) dots.resize(n);
   }
-  /// Index of the vertex maximising dot(v, d): the first one on ties, with the same
-  /// arithmetic as Vec3::dot, so it is the vertex ConvexHull::support_index's brute
-  /// force (hulls up to 32 vertices) returns, bit for bit.
-  int support_index(const Vec3& d, Real* max_dot = nullptr) {
-    const Real dx = d.x(), dy = d.y(), dz = d.z();
-    Real* __restrict out = dots.data();
-    const Real* __restrict px = x;
-    const Real* __restrict py = y;
-    const Real* __restrict pz = z;
-    // The dots and their maximum in one branch-free pass, then the first vertex
-    // reaching the maximum: the same vertex as a scan keeping the first strict maximum
-    // (dots are finite, no NaN). Same operations in the same order as the scalar
-    // expression, so the same bits.
-    int i = 0;
-    Real max_d = -kInf;
-#ifdef __SSE2__
-    const __m128d vdx = _mm_set1_pd(dx), vdy = _mm_set1_pd(dy), vdz = _mm_set1_pd(dz);
-    __m128d m2 = _mm_set1_pd(-kInf);
-    for (; i + 2 <= n; i += 2) {
-      const __m128d t = _mm_add_pd(_mm_add_pd(_mm_mul_pd(_mm_loadu_pd(px + i), vdx),
-                                              _mm_mul_pd(_mm_loadu_pd(py + i), vdy)),
-                                   _mm_mul_pd(_mm_loadu_pd(pz + i), vdz));
-      _mm_storeu_pd(out + i, t);
-      m2 = _mm_max_pd(m2, t);
-    }
-    max_d = std::max(_mm_cvtsd_f64(m2), _mm_cvtsd_f64(_mm_unpackhi_pd(m2, m2)));
-#endif
-    for (; i < n; ++i) {
-      out[i] = (px[i] * dx + py[i] * dy) + pz[i] * dz;
-      max_d = std::max(max_d, out[i]);
-    }
-    for (i = 0; i < n - 1; ++i)
-      if (out[i] == max_d) break;
-    if (max_dot) *max_dot = max_d;
-    return i;
+  /// Index of the vertex maximising dot(v, d), the first on ties: the vertex
+  /// ConvexHull::support_index returns for hulls up to 32 vertices, bit for bit.
+  int support_index(const Vec3& d, Real* max_dot = nullptr) const {
+    return detail::support_index_soa(x, y, z, n, d, max_dot);
   }
 };
+
+/// Loads one byte of every cache line of the arrays the queries below read from h
+/// (coordinates, faces, vertices, half-edges for the clipped face and, for B, the edge
+/// records), all at once. A broadphase's pairs are rarely in cache, and these loads are
+/// independent, so their misses overlap, where the queries' own loads come one after
+/// another (support, then the edge records, then their faces...). Measured on the
+/// narrowphase benchmark's overlapping hull pairs (20 vertices, a different pair every
+/// call, out of cache): 4.8-5.2 -> 3.9-4.1 us; _mm_prefetch on the same lines changed
+/// nothing measurable.
+inline void touch_hull(const ConvexHull& h, bool edges) {
+  unsigned acc = 0;
+  auto lines = [&acc](const void* p, std::size_t bytes) {
+    const unsigned char* c = static_cast<const unsigned char*>(p);
+    for (std::size_t o = 0; o < bytes; o += 64) acc += c[o];
+  };
+  lines(h.vertex_coords().data(), h.vertex_coords().size() * sizeof(Real));
+  lines(h.faces().data(), h.faces().size() * sizeof(ConvexHull::Face));
+  lines(h.vertices().data(), h.vertices().size() * sizeof(Vec3));
+  lines(h.half_edges().data(), h.half_edges().size() * sizeof(ConvexHull::HalfEdge));
+  if (edges) lines(h.edge_arcs().data(), h.edge_arcs().size() * sizeof(ConvexHull::EdgeArc));
+#if defined(__GNUC__)
+  asm volatile("" : : "r"(acc));  // keep the loads: their values are not used
+#else
+  static volatile unsigned sink;
+  sink = acc;
+#endif
+}
 
 /// Per-thread scratch space: its vectors keep their capacity, so after the first
 /// calls (the largest hulls seen) collide_hull_hull allocates nothing.
 struct Workspace {
   std::vector<int> support_a;  ///< per face of B: A's support vertex along -normal
+  std::vector<Real> sep_b;     ///< per face of B: its separation (up to round-off)
   VertexSoA verts_a, verts_b;        ///< A's and B's vertices, each in its own frame
   std::vector<Vec3> verts_b_in_a;    ///< B's vertices moved into A's frame
   std::vector<Vec3> neg_normals_b;   ///< B's face normals, negated, in A's frame
@@ -204,8 +236,17 @@ bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_i
   // B's vertex centroid in A's frame: GJK's first direction here, the pruning bound of
   // A's face queries below.
   const Vec3 centroid_b = b_in_a.transform_point(b.vertex_centroid());
-  if (gjk_distance(CoreSupport<ConvexHull>(a), CoreSupport<ConvexHull>(b), b_in_a, GjkSettings{},
-                   centroid_b - a.vertex_centroid(), reach)
+  // Balls around the centroids first: outer balls farther apart than `reach` prove the
+  // hulls are (GJK would cull the pair); inner balls that overlap prove the hulls
+  // overlap (GJK could not cull it). The factors keep round-off (~1e-16 relative) on the
+  // safe side.
+  const Vec3 centres = centroid_b - a.vertex_centroid();
+  const Real centre_dist = centres.norm();
+  if (centre_dist > (a.outer_radius() + b.outer_radius() + reach) * (1 + 1e-9)) return false;
+  touch_hull(a, false);
+  touch_hull(b, true);
+  if (!(centre_dist < (a.inner_radius() + b.inner_radius()) * (1 - 1e-9)) &&
+      gjk_distance(CoreSupport<ConvexHull>(a), CoreSupport<ConvexHull>(b), b_in_a, GjkSettings{}, centres, reach)
           .culled)
     return false;
   const Mat3 R = b_in_a.matrix();
@@ -259,6 +300,7 @@ bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_i
   // ---- Face queries of B (in B's frame). A's support vertex along each face's
   // -normal is kept for the edge queries.
   ws.support_a.resize(fb.size());
+  ws.sep_b.resize(fb.size());
   Real sep_b = -kInf;
   int face_b = 0;
   for (int g = 0; g < static_cast<int>(fb.size()); ++g) {
@@ -270,15 +312,30 @@ bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_i
     // the best nor exceed reach, the exact value (a quaternion transform) is not needed.
     if (max_dot < kInf) {
       const Real approx = -max_dot + fb[g].normal.dot(a_in_b.position) - fb[g].offset;
+      ws.sep_b[g] = approx;
       if (approx + prune_slack < sep_b && approx + prune_slack < reach) continue;
     }
     const Real s = fb[g].normal.dot(a_in_b.transform_point(a.vertices()[va])) - fb[g].offset;
+    ws.sep_b[g] = s;
     if (s > reach) return false;
     if (s > sep_b) {
       sep_b = s;
       face_b = g;
     }
   }
+  // The better face axis (A's unless B's is clearly better, clip::sat_better). An edge
+  // axis only matters if its separation exceeds edge_floor: above `edge_bar` it beats
+  // the face axis, above `reach` it separates the pair (and edge_bar may exceed reach
+  // when the best face separation is near it). Edge axes that provably stay at or
+  // below edge_floor are left out below (exactly: they could change nothing).
+  AxisKind kind = AxisKind::kFaceA;
+  Real best = sep_a;
+  if (clip::sat_better(sep_b, best, size)) {
+    kind = AxisKind::kFaceB;
+    best = sep_b;
+  }
+  const Real edge_bar = best + clip::kSatRelTolerance * std::abs(best) + clip::kSatAbsTolerance * size;
+  const Real edge_floor = std::min(edge_bar, reach) - prune_slack;
   // ---- Edge queries with Gauss-map pruning, in A's frame.
   //
   // On A's Gauss map the directions whose support vertex is v form a spherically
@@ -322,6 +379,8 @@ bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_i
     const Vec3& q1 = qb[eb.head];
     const Vec3& c = nb[g1];
     const Vec3& d = nb[g2];
+    if (edge_bound(ws.sep_b[g1], ws.sep_b[g2], c, d, q0, verts_a[v_start], verts_a[v_end]) < edge_floor)
+      continue;
     const Vec3 dxc = d.cross(c);
     const Vec3 e2 = q1 - q0;
     const Real e2_len2 = e2.squaredNorm();
@@ -336,7 +395,14 @@ bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_i
       const Vec3& p0 = verts_a[ea.tail];
       const Vec3 dir = verts_a[ea.head] - p0;
       Vec3 n = dir.cross(e2);
-      const Real len = n.norm();
+      // The separation along n is raw / |n| (oriented away from A's centroid); an axis
+      // that cannot exceed edge_floor needs neither the square root nor the division.
+      const Real len2 = n.squaredNorm();
+      const Real raw = n.dot(q0 - p0) * (n.dot(p0 - centroid_a) < 0 ? -1.0 : 1.0);
+      if (edge_floor > 0 ? (raw <= 0 || raw * raw <= edge_floor * edge_floor * len2)
+                         : (raw < 0 && raw * raw >= edge_floor * edge_floor * len2))
+        return true;
+      const Real len = std::sqrt(len2);
       if (len > kParallelSin * std::sqrt(dir.squaredNorm() * e2_len2)) {
         n /= len;
         if (n.dot(p0 - centroid_a) < 0) n = -n;
@@ -381,12 +447,6 @@ bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_i
     }
   }
 
-  AxisKind kind = AxisKind::kFaceA;
-  Real best = sep_a;
-  if (clip::sat_better(sep_b, best, size)) {
-    kind = AxisKind::kFaceB;
-    best = sep_b;
-  }
   if (edge_a >= 0 && clip::sat_better(sep_e, best, size)) kind = AxisKind::kEdge;
 
   if (kind == AxisKind::kEdge) {

@@ -60,6 +60,7 @@
 #include <unordered_map>
 
 #include "wmo/geometry/shapes.h"
+#include "wmo/geometry/support_soa.h"
 
 namespace wmo {
 
@@ -752,6 +753,11 @@ ConvexHull::ConvexHull(const std::vector<Vec3>& points) : ConvexShape(ShapeType:
     for (int axis = 0; axis < 3; ++axis) vertex_coords_[axis * nv + i] = vertices_[i][axis];
   for (const Vec3& v : vertices_) vertex_centroid_ += v;
   vertex_centroid_ /= static_cast<Real>(nv);
+  inner_radius_ = kInf;
+  for (const Face& f : faces_) inner_radius_ = std::min(inner_radius_, f.offset - f.normal.dot(vertex_centroid_));
+  inner_radius_ = std::max<Real>(inner_radius_, 0);
+  outer_radius_ = 0;
+  for (const Vec3& v : vertices_) outer_radius_ = std::max(outer_radius_, (v - vertex_centroid_).norm());
 }
 
 std::vector<int> ConvexHull::face_vertices(int f) const {
@@ -769,16 +775,10 @@ std::vector<int> ConvexHull::face_vertices(int f) const {
 int ConvexHull::support_index(const Vec3& dir) const {
   const int n = static_cast<int>(vertices_.size());
   if (n <= kBruteForceSupportMax) {
-    int best = 0;
-    Real best_d = vertices_[0].dot(dir);
-    for (int i = 1; i < n; ++i) {
-      const Real d = vertices_[i].dot(dir);
-      if (d > best_d) {
-        best_d = d;
-        best = i;
-      }
-    }
-    return best;
+    // The first vertex of largest dot(v, dir), on the coordinate arrays (vectorised,
+    // branch-free; the same vertex and bits as a scalar scan over vertices_).
+    const Real* x = vertex_coords_.data();
+    return detail::support_index_soa(x, x + n, x + 2 * n, n, dir);
   }
   // Hill climbing on the vertex graph (Cameron 1997, "Enhancing GJK"): on a convex
   // polytope a vertex with no better neighbour is a global maximum of dot(x, dir).
