@@ -216,6 +216,7 @@ inline void touch_hull(const ConvexHull& h, bool edges) {
 struct Workspace {
   std::vector<int> support_a;  ///< per face of B: A's support vertex along -normal
   std::vector<Real> sep_b;     ///< per face of B: its separation (up to round-off)
+  std::vector<Real> max_dot_a; ///< per face of B: dot(A's support vertex, -normal)
   VertexSoA verts_a, verts_b;        ///< A's and B's vertices, each in its own frame
   std::vector<Vec3> verts_b_in_a;    ///< B's vertices moved into A's frame
   std::vector<Vec3> neg_normals_b;   ///< B's face normals, negated, in A's frame
@@ -301,12 +302,24 @@ bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_i
   // -normal is kept for the edge queries.
   ws.support_a.resize(fb.size());
   ws.sep_b.resize(fb.size());
+  // All of them at once, vectorised across the faces (detail::support_indices_soa):
+  // the edge queries need every one.
+  if (brute_a) {
+    ws.max_dot_a.resize(fb.size());
+    detail::support_indices_soa(ws.verts_a.x, ws.verts_a.y, ws.verts_a.z, ws.verts_a.n, nb.data(),
+                                static_cast<int>(fb.size()), ws.support_a.data(), ws.max_dot_a.data());
+  }
   Real sep_b = -kInf;
   int face_b = 0;
   for (int g = 0; g < static_cast<int>(fb.size()); ++g) {
     Real max_dot = kInf;
-    const int va = brute_a ? ws.verts_a.support_index(nb[g], &max_dot) : a.support_index(nb[g]);
-    ws.support_a[g] = va;
+    int va;
+    if (brute_a) {
+      va = ws.support_a[g];
+      max_dot = ws.max_dot_a[g];
+    } else {
+      va = ws.support_a[g] = a.support_index(nb[g]);
+    }
     // Pruning (exact), as for A's faces: s below is, up to round-off, -max_dot +
     // n_g.(a_in_b.position) - offset_g; if even that plus the slack can neither beat
     // the best nor exceed reach, the exact value (a quaternion transform) is not needed.

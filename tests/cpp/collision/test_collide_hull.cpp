@@ -277,7 +277,8 @@ TEST(CollideHullHull, AgreesWithGenericPathOnRandomHulls) {
 }
 
 
-// The Gauss-map walk must find the best edge axis: on overlapping pairs the largest
+// The Gauss-map walk must find the best edge axis, and the edge bound (edge_bound in
+// collide_hull_hull.cpp) must never skip it: on overlapping pairs the largest
 // separation over the Minkowski-face edge pairs equals the largest over ALL edge
 // pairs whenever an edge axis can win (an edge axis that is not a Minkowski face
 // separates less than the true maximum), so collide_hull_hull must choose an edge

@@ -12,6 +12,7 @@
 #include <string>
 
 #include "wmo/geometry/shapes.h"
+#include "wmo/geometry/support_soa.h"
 
 namespace wmo {
 namespace {
@@ -216,6 +217,91 @@ TEST(ConvexHull, SupportMatchesBruteForce) {
       EXPECT_EQ(h.vertices()[h.support_index(d)], s);
     }
   }
+}
+
+// The vectorised support searches (support_soa.h) against a scalar scan keeping the
+// first strict maximum, exactly (same index, same bits of the maximum): point sets of
+// every size around the vector widths (1..9, so every remainder path runs), random
+// directions, and ties (repeated points, axis directions on a cube's corners, where
+// several points share the maximum and the first must win).
+TEST(SupportSoa, MatchesFirstMaximumOfScalarScanIncludingTies) {
+  std::mt19937_64 rng(17);
+  std::uniform_real_distribution<Real> u(-1, 1);
+  auto scan = [](const std::vector<Real>& x, const std::vector<Real>& y, const std::vector<Real>& z,
+                 const Vec3& d, Real& m) {
+    int best = 0;
+    m = Vec3(x[0], y[0], z[0]).dot(d);
+    for (std::size_t i = 1; i < x.size(); ++i) {
+      const Real t = Vec3(x[i], y[i], z[i]).dot(d);
+      if (t > m) {
+        m = t;
+        best = static_cast<int>(i);
+      }
+    }
+    return best;
+  };
+  int ties = 0;
+  for (int n = 1; n <= 9; ++n) {
+    for (int trial = 0; trial < 40; ++trial) {
+      std::vector<Real> x(n), y(n), z(n);
+      for (int i = 0; i < n; ++i) {
+        if (trial % 2) {  // cube corners, repeated: ties along axis directions
+          x[i] = (i & 1) ? 1 : -1;
+          y[i] = (i & 2) ? 1 : -1;
+          z[i] = (i & 4) ? 1 : -1;
+        } else {
+          x[i] = u(rng);
+          y[i] = u(rng);
+          z[i] = u(rng);
+        }
+      }
+      std::vector<Vec3> dirs;
+      for (int k = 0; k < 11; ++k)
+        dirs.push_back(trial % 2 && k < 6 ? Vec3::Unit(k % 3) * (k < 3 ? 1 : -1) : random_unit(rng));
+      std::vector<int> idx(dirs.size());
+      std::vector<Real> mx(dirs.size());
+      detail::support_indices_soa(x.data(), y.data(), z.data(), n, dirs.data(), static_cast<int>(dirs.size()),
+                                  idx.data(), mx.data());
+      for (std::size_t k = 0; k < dirs.size(); ++k) {
+        Real m_ref;
+        const int ref = scan(x, y, z, dirs[k], m_ref);
+        Real m_one;
+        const int one = detail::support_index_soa(x.data(), y.data(), z.data(), n, dirs[k], &m_one);
+        EXPECT_EQ(idx[k], ref) << "n " << n << " trial " << trial << " dir " << k;
+        EXPECT_EQ(one, ref) << "n " << n << " trial " << trial << " dir " << k;
+        EXPECT_EQ(mx[k], m_ref);
+        EXPECT_EQ(m_one, m_ref);
+        int count = 0;
+        for (int i = 0; i < n; ++i) count += Vec3(x[i], y[i], z[i]).dot(dirs[k]) == m_ref;
+        ties += count > 1;
+      }
+    }
+  }
+  EXPECT_GT(ties, 100);  // the tie cases really ran
+}
+
+// inner_radius / outer_radius of a box hull: the centroid is the centre, the nearest
+// face plane is the smallest half extent away, the farthest vertex the half diagonal.
+TEST(ConvexHull, InnerAndOuterRadiusOfABox) {
+  const Vec3 h(0.5, 2.0, 1.0), c(3, -1, 2);
+  std::vector<Vec3> pts;
+  for (int i = 0; i < 8; ++i)
+    pts.push_back(c + Vec3((i & 1) ? h.x() : -h.x(), (i & 2) ? h.y() : -h.y(), (i & 4) ? h.z() : -h.z()));
+  const ConvexHull hull(pts);
+  EXPECT_NEAR(hull.inner_radius(), 0.5, 1e-12);
+  EXPECT_NEAR(hull.outer_radius(), h.norm(), 1e-12);
+  // And on a random hull: every face plane at least inner_radius from the centroid
+  // (one exactly), every vertex within outer_radius (one exactly).
+  std::mt19937_64 rng(5);
+  std::vector<Vec3> cloud;
+  for (int i = 0; i < 40; ++i) cloud.push_back(random_unit(rng) * (1 + 0.3 * (i % 3)));
+  const ConvexHull r(cloud);
+  Real near = kInf, far = 0;
+  for (const auto& f : r.faces()) near = std::min(near, f.offset - f.normal.dot(r.vertex_centroid()));
+  for (const Vec3& v : r.vertices()) far = std::max(far, (v - r.vertex_centroid()).norm());
+  EXPECT_GT(r.inner_radius(), 0);
+  EXPECT_EQ(r.inner_radius(), near);
+  EXPECT_EQ(r.outer_radius(), far);
 }
 
 TEST(ConvexHull, SupportingFaceIsMostAlignedFaceCcw) {
