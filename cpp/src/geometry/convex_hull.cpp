@@ -753,9 +753,6 @@ ConvexHull::ConvexHull(const std::vector<Vec3>& points) : ConvexShape(ShapeType:
     for (int axis = 0; axis < 3; ++axis) vertex_coords_[axis * nv + i] = vertices_[i][axis];
   for (const Vec3& v : vertices_) vertex_centroid_ += v;
   vertex_centroid_ /= static_cast<Real>(nv);
-  inner_radius_ = kInf;
-  for (const Face& f : faces_) inner_radius_ = std::min(inner_radius_, f.offset - f.normal.dot(vertex_centroid_));
-  inner_radius_ = std::max<Real>(inner_radius_, 0);
   outer_radius_ = 0;
   for (const Vec3& v : vertices_) outer_radius_ = std::max(outer_radius_, (v - vertex_centroid_).norm());
 }

@@ -234,10 +234,6 @@ class ConvexHull final : public ConvexShape {
   const std::vector<int>& vertex_edge_begin() const { return vertex_edge_begin_; }
   /// Mean of the vertices (m, hull frame): a point inside the hull.
   const Vec3& vertex_centroid() const { return vertex_centroid_; }
-  /// Distance from vertex_centroid() to the nearest face plane (m): the ball of this
-  /// radius around the centroid lies inside the hull. Two hulls whose centroids are
-  /// closer than the sum of their inner radii overlap.
-  Real inner_radius() const { return inner_radius_; }
   /// Distance from vertex_centroid() to the farthest vertex (m): the ball of this radius
   /// around the centroid contains the hull.
   Real outer_radius() const { return outer_radius_; }
@@ -264,7 +260,6 @@ class ConvexHull final : public ConvexShape {
   std::vector<int> vertex_edge_begin_;
   std::vector<Real> vertex_coords_;
   Vec3 vertex_centroid_ = Vec3::Zero();
-  Real inner_radius_ = 0;
   Real outer_radius_ = 0;
   Aabb aabb_;
   Real tolerance_ = 0;
