@@ -56,12 +56,17 @@
 //
 // Measured on the narrowphase benchmark's hull_hull pairs (20-vertex hulls, 4000
 // configurations, a different pair of hulls every call, out of cache;
-// `WMO_BENCH_BY_CLASS=1 WMO_BENCH_METHODS=wmo_special,fcl bench_narrowphase out 4000
-// hull_hull`): deep overlaps 12.0 -> 4.1 us, barely separated 1.1 -> 1.2, far
-// 0.24 -> 0.09, the mean of the four classes 6.6 -> 2.7 us (FCL 2.2). Of that, the edge
-// bound took the deep overlaps' Gauss-map tests from 139 to 5 a call, the
-// centroid balls skip GJK for about half of the deep overlaps and answer most far
-// pairs, and touch_hull's upfront loads overlap the cache misses.
+// `WMO_BENCH_METHODS=wmo_special,fcl,libccd_mpr bench_narrowphase out 4000 hull_hull`,
+// 5 runs): 6.6 us a query before the changes below, 2.16-2.23 us after (FCL, whose
+// libccd MPR depth is off by up to 0.3 m here, 1.56-1.92 us). Deep overlaps went from
+// 12.0 to ~3.2 us, far pairs from 0.24 to 0.09 (WMO_BENCH_BY_CLASS=1). What did it: the
+// edge bound (Gauss-map tests 139 -> 5 a deep call, no square root for edge axes below
+// the bar), the vectorised support searches, GJK only where the margin needs it, the
+// centroid balls, touch_hull. Tried and dropped (no gain or slower, measured): a
+// branch-free edge pre-pass and face candidate lists, the face with the best centroid
+// bound first, a third point in A's face bound, centroid-bound pruning of B's faces
+// and edges before their support searches, a per-face vertex list instead of the
+// half-edges for clipping, a GJK iteration cap.
 
 #include <cmath>
 #include <vector>
