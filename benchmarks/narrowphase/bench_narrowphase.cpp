@@ -17,7 +17,9 @@
 //   wmo_gjk_epa     the same with use_special_routines = false: GJK, then EPA on the cores
 //                   when overlapping, then face clipping for the manifold. Default GJK/EPA
 //                   tolerances (1e-10 relative).
-//   wmo_gjk_epa_point  penetration_convex_convex: GJK, then EPA, one contact (depth,
+//   wmo_gjk_epa_point  penetration_convex_convex with cull_distance 0: GJK, stopping at
+//                   the first separating plane of a separated pair (no distance, like
+//                   libccd's and FCL's boolean GJK), then EPA, one contact (depth,
 //                   normal, witness points) and no manifold, as libccd and FCL answer on
 //                   their GJK/EPA paths; its difference from wmo_gjk_epa is the clipping.
 //   libccd_gjk_epa  ccdGJKPenetration: GJK boolean test; when overlapping, EPA gives depth,
@@ -100,7 +102,10 @@ using Query = std::function<double(Case&)>;
 
 /// wmo_gjk_epa_point: penetration_convex_convex's one contact, depth (NAN if apart).
 double wmo_point_depth(const Case& c, const CollideSettings& s) {
-  const DistanceResult r = penetration_convex_convex(*c.cfg.a, *c.cfg.b, c.cfg.pose_a.relative(c.cfg.pose_b), s.gjk, s.epa);
+  // cull_distance 0: a separated pair ends at GJK's first separating plane, with no
+  // distance computed, as libccd's and FCL's GJK/EPA stop at their boolean test.
+  const DistanceResult r =
+      penetration_convex_convex(*c.cfg.a, *c.cfg.b, c.cfg.pose_a.relative(c.cfg.pose_b), s.gjk, s.epa, 0.0);
   return r.intersecting ? -r.distance : NAN;
 }
 
