@@ -80,7 +80,10 @@ __attribute__((target("avx2"))) void batch_avx2(const Real* x, const Real* y, co
 }
 
 bool cpu_has_avx2() {
-  static const bool has = __builtin_cpu_supports("avx2");
+  static const bool has = [] {
+    __builtin_cpu_init();  // in case the first call comes from a static initialiser
+    return __builtin_cpu_supports("avx2") != 0;
+  }();
   return has;
 }
 #endif

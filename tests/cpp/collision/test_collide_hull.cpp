@@ -352,6 +352,80 @@ TEST(CollideHullHull, EdgeQueryMatchesBruteForceSat) {
   EXPECT_GE(edge_wins, 30);
 }
 
+// Hulls above 32 vertices take the hill-climbing support (ConvexHull::support_index)
+// instead of the vectorised scans, and their separations of B's faces come exact
+// rather than from the pruning's estimate: the same checks as above against the
+// brute-force SAT, on 60 points of an ellipsoid, overlapping and separated (the verdict
+// for margin 0: contact iff no axis separates). Pairs within 1e-9 * size of a decision
+// threshold are skipped.
+TEST(CollideHullHull, LargeHullsMatchBruteForceSat) {
+  std::mt19937_64 rng(77);
+  std::uniform_real_distribution<Real> u01(0, 1);
+  std::normal_distribution<Real> g(0, 1);
+  auto uni = [&](Real lo, Real hi) { return lo + (hi - lo) * u01(rng); };
+  auto sphere_cloud = [&] {
+    std::vector<Vec3> p;
+    const Vec3 r(uni(0.2, 1.5), uni(0.2, 1.5), uni(0.2, 1.5));  // ellipsoids: more edge axes win
+    while (p.size() < 60) {
+      const Vec3 v(g(rng), g(rng), g(rng));
+      if (v.norm() > 1e-3) p.push_back(r.cwiseProduct(v.normalized()));
+    }
+    return p;
+  };
+  auto better = [](Real cand, Real best, Real size) { return cand - (best + 0.05 * std::abs(best) + 1e-5 * size); };
+  int overlapping = 0, separated = 0, edge_wins = 0;
+  for (int trial = 0; trial < 600; ++trial) {
+    const ConvexHull a(sphere_cloud()), b(sphere_cloud());
+    ASSERT_GT(a.vertices().size(), 32u);
+    const Quat q = Quat(uni(-1, 1), uni(-1, 1), uni(-1, 1), uni(-1, 1)).normalized();
+    const Pose pose(Vec3(g(rng), g(rng), g(rng)).normalized() * uni(0.2, 3.5), q);
+    const Real size = std::max(a.local_aabb().half_extents().maxCoeff(), b.local_aabb().half_extents().maxCoeff());
+    const BruteSat r = brute_sat(a, b, pose);
+    const Real top = std::max({r.face_a, r.face_b, r.edge});
+    if (std::abs(top) < 1e-9 * size) continue;
+    Manifold m;
+    const bool hit = collide_hull_hull(a, b, pose, 0, m);
+    ASSERT_EQ(hit, top < 0) << trial;
+    if (!hit) {
+      ++separated;
+      continue;
+    }
+    Real best = r.face_a;
+    const Real db = better(r.face_b, best, size);
+    if (std::abs(db) < 1e-9 * size) continue;
+    if (db > 0) best = r.face_b;
+    const Real de = better(r.edge, best, size);
+    if (std::abs(de) < 1e-9 * size) continue;
+    ++overlapping;
+    check_conventions(m, 1e-9 * size);
+    EXPECT_EQ(is_edge_contact(m), de > 0) << trial;
+    if (de > 0 && is_edge_contact(m)) {
+      ++edge_wins;
+      EXPECT_NEAR(m.points[0].depth, -r.edge, 1e-9 * size) << trial;
+    }
+  }
+  std::printf("overlapping %d (edge contacts %d), separated %d\n", overlapping, edge_wins, separated);
+  EXPECT_GE(overlapping, 200);  // coverage guards, not tolerances
+  EXPECT_GE(separated, 100);
+  EXPECT_GE(edge_wins, 10);
+}
+
+// Corner against corner with a margin: two cubes (half extent 1) whose facing corners are
+// delta = 0.01 apart along each axis. Every face and edge axis separates them by 0.01,
+// their distance is 0.01 sqrt(3) = 0.0173. Margin 0.015: within it on every axis but
+// farther apart than it, so no speculative contact (CollideSettings::margin; GJK decides
+// this case). Margin 0.02: a speculative face contact at depth -0.01.
+TEST(CollideHullHull, CornerAgainstCornerBeyondTheMarginHasNoContact) {
+  const ConvexHull c(box_corners(Vec3(1, 1, 1)));
+  const Pose pose(Vec3::Constant(2.01), Quat::Identity());
+  Manifold m;
+  EXPECT_FALSE(collide_hull_hull(c, c, pose, 0.015, m));
+  EXPECT_FALSE(collide_hull_hull(c, c, pose, 0.0, m));
+  ASSERT_TRUE(collide_hull_hull(c, c, pose, 0.02, m));
+  check_conventions(m, kTol);
+  EXPECT_NEAR(m.max_depth(), -0.01, 1e-12);
+}
+
 TEST(CollideHullHull, ExactlyTouchingFacesHaveZeroDepth) {
   const ConvexHull a(box_corners(Vec3(1, 1, 1))), b(box_corners(Vec3(0.5, 0.5, 0.5)));
   Manifold m;
