@@ -98,6 +98,34 @@ BruteSat brute_sat(const ConvexHull& a, const ConvexHull& b, const Pose& b_in_a)
   return r;
 }
 
+// The axis kind the brute-force SAT picks under the documented face bias (narrowphase.h:
+// an axis must beat the best so far by 5% + 1e-5 * size; A's faces, then B's, then
+// edges): 1 for an edge axis, 0 for a face axis, -1 when within 1e-9 * size of a bias
+// threshold (either answer is right there, the case is skipped).
+int expected_edge_axis(const BruteSat& r, Real size) {
+  auto better = [size](Real cand, Real best) { return cand - (best + 0.05 * std::abs(best) + 1e-5 * size); };
+  Real best = r.face_a;
+  const Real db = better(r.face_b, best);
+  if (std::abs(db) < 1e-9 * size) return -1;
+  if (db > 0) best = r.face_b;
+  const Real de = better(r.edge, best);
+  if (std::abs(de) < 1e-9 * size) return -1;
+  return de > 0;
+}
+
+// An overlapping pair's manifold against the brute-force SAT's choice: conventions, the
+// kind of axis and, for an edge axis, the depth. Returns true for an edge contact.
+// Depth tolerance: the plane distance between the two edges' lines along the normal,
+// from vertices of size ~1: round-off ~1e-15 * size, amplified by at most
+// 1/sin(angle) <= 1e6 for near-parallel edges; 1e-9 * size covers that.
+bool check_against_brute(const Manifold& m, const BruteSat& r, bool edge_expected, Real size, int trial) {
+  check_conventions(m, 1e-9 * size);
+  EXPECT_EQ(is_edge_contact(m), edge_expected) << trial;
+  if (!(edge_expected && is_edge_contact(m))) return false;
+  EXPECT_NEAR(m.points[0].depth, -r.edge, 1e-9 * size) << trial;
+  return true;
+}
+
 TEST(CollideHullHull, BoxCornerHullsEqualBoxBox) {
   std::mt19937_64 rng(7);
   std::uniform_real_distribution<Real> u01(0, 1);
@@ -312,7 +340,6 @@ TEST(CollideHullHull, EdgeQueryMatchesBruteForceSat) {
     }
     return p;
   };
-  auto better = [](Real cand, Real best, Real size) { return cand - (best + 0.05 * std::abs(best) + 1e-5 * size); };
   int tested = 0, edge_wins = 0, per_family[3] = {0, 0, 0};
   for (int trial = 0; trial < 3000 && tested < 600; ++trial) {
     const int family = trial % 3;
@@ -323,25 +350,13 @@ TEST(CollideHullHull, EdgeQueryMatchesBruteForceSat) {
     const Real size = std::max(a.local_aabb().half_extents().maxCoeff(), b.local_aabb().half_extents().maxCoeff());
     const BruteSat r = brute_sat(a, b, pose);
     if (!(std::max({r.face_a, r.face_b, r.edge}) < -1e-9 * size)) continue;  // overlapping only
-    Real best = r.face_a;
-    const Real db = better(r.face_b, best, size);
-    if (std::abs(db) < 1e-9 * size) continue;
-    if (db > 0) best = r.face_b;
-    const Real de = better(r.edge, best, size);
-    if (std::abs(de) < 1e-9 * size) continue;
+    const int edge = expected_edge_axis(r, size);
+    if (edge < 0) continue;
     ++tested;
     ++per_family[family];
     Manifold m;
     ASSERT_TRUE(collide_hull_hull(a, b, pose, 0, m)) << trial;
-    check_conventions(m, 1e-9 * size);
-    EXPECT_EQ(is_edge_contact(m), de > 0) << trial << " family " << family;
-    if (de > 0 && is_edge_contact(m)) {
-      ++edge_wins;
-      // Plane distance between the two edges' lines along the normal, from vertices of
-      // size ~1: round-off ~1e-15 * size, amplified by at most 1/sin(angle) <= 1e6 for
-      // near-parallel edges; 1e-9 * size covers that.
-      EXPECT_NEAR(m.points[0].depth, -r.edge, 1e-9 * size) << trial;
-    }
+    edge_wins += check_against_brute(m, r, edge == 1, size, trial);
   }
   std::printf("tested %d (clouds %d, spheres %d, turned cubes %d), edge contacts %d\n", tested,
               per_family[0], per_family[1], per_family[2], edge_wins);
@@ -372,7 +387,6 @@ TEST(CollideHullHull, LargeHullsMatchBruteForceSat) {
     }
     return p;
   };
-  auto better = [](Real cand, Real best, Real size) { return cand - (best + 0.05 * std::abs(best) + 1e-5 * size); };
   int overlapping = 0, separated = 0, edge_wins = 0;
   for (int trial = 0; trial < 600; ++trial) {
     const ConvexHull a(sphere_cloud()), b(sphere_cloud());
@@ -390,19 +404,10 @@ TEST(CollideHullHull, LargeHullsMatchBruteForceSat) {
       ++separated;
       continue;
     }
-    Real best = r.face_a;
-    const Real db = better(r.face_b, best, size);
-    if (std::abs(db) < 1e-9 * size) continue;
-    if (db > 0) best = r.face_b;
-    const Real de = better(r.edge, best, size);
-    if (std::abs(de) < 1e-9 * size) continue;
+    const int edge = expected_edge_axis(r, size);
+    if (edge < 0) continue;
     ++overlapping;
-    check_conventions(m, 1e-9 * size);
-    EXPECT_EQ(is_edge_contact(m), de > 0) << trial;
-    if (de > 0 && is_edge_contact(m)) {
-      ++edge_wins;
-      EXPECT_NEAR(m.points[0].depth, -r.edge, 1e-9 * size) << trial;
-    }
+    edge_wins += check_against_brute(m, r, edge == 1, size, trial);
   }
   std::printf("overlapping %d (edge contacts %d), separated %d\n", overlapping, edge_wins, separated);
   EXPECT_GE(overlapping, 200);  // coverage guards, not tolerances
