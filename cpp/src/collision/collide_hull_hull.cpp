@@ -57,9 +57,10 @@
 // Measured on the narrowphase benchmark's hull_hull pairs (20-vertex hulls, 4000
 // configurations, a different pair of hulls every call, out of cache;
 // `WMO_BENCH_METHODS=wmo_special,fcl,libccd_mpr bench_narrowphase out 4000 hull_hull`,
-// 5 runs): 6.6 us a query before the changes below, 2.16-2.23 us after (FCL, whose
-// libccd MPR depth is off by up to 0.3 m here, 1.56-1.92 us). Deep overlaps went from
-// 12.0 to ~3.2 us, far pairs from 0.24 to 0.09 (WMO_BENCH_BY_CLASS=1). What did it: the
+// 8 runs): 6.6 us a query before the changes below, 2.0-2.3 us after (FCL, whose
+// libccd MPR depth is off by up to 0.3 m here, 1.6-2.2 us; 1.03-1.10x in the last four
+// runs). Deep overlaps went from 12.0 to ~2.8 us, far pairs from 0.24 to 0.09
+// (WMO_BENCH_BY_CLASS=1). What did it: the
 // edge bound (Gauss-map tests 139 -> 5 a deep call, no square root for edge axes below
 // the bar), the vectorised support searches, GJK only where the margin needs it, the
 // centroid balls, touch_hull. Tried and dropped (no gain or slower, measured): a
