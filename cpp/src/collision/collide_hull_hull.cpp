@@ -416,14 +416,14 @@ bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_i
       // The separation along n is raw / |n| (oriented away from A's centroid); an axis
       // that cannot exceed edge_floor needs neither the square root nor the division.
       const Real len2 = n.squaredNorm();
-      const Real raw = n.dot(q0 - p0) * (n.dot(p0 - centroid_a) < 0 ? -1.0 : 1.0);
+      const bool flip = n.dot(p0 - centroid_a) < 0;
+      const Real raw = flip ? -n.dot(q0 - p0) : n.dot(q0 - p0);
       if (edge_floor > 0 ? (raw <= 0 || raw * raw <= edge_floor * edge_floor * len2)
                          : (raw < 0 && raw * raw >= edge_floor * edge_floor * len2))
         return true;
       const Real len = std::sqrt(len2);
       if (len > kParallelSin * std::sqrt(dir.squaredNorm() * e2_len2)) {
-        n /= len;
-        if (n.dot(p0 - centroid_a) < 0) n = -n;
+        n /= flip ? -len : len;
         const Real s = n.dot(q0 - p0);
         if (s > reach) separated = true;
         if (s > sep_e) {
