@@ -18,9 +18,11 @@ void scalar_one(const Real* x, const Real* y, const Real* z, int n, const Vec3& 
   idx = support_index_soa(x, y, z, n, d, &m);
 }
 
+}  // namespace
+
+void support_indices_soa_sse2(const Real* x, const Real* y, const Real* z, int n, const Vec3* dirs, int count,
+                              int* idx, Real* max_dot) {
 #ifdef __SSE2__
-void batch_sse2(const Real* x, const Real* y, const Real* z, int n, const Vec3* dirs, int count, int* idx,
-                Real* max_dot) {
   int k = 0;
   for (; k + 2 <= count; k += 2) {
     const __m128d dx = _mm_set_pd(dirs[k + 1].x(), dirs[k].x());
@@ -45,8 +47,12 @@ void batch_sse2(const Real* x, const Real* y, const Real* z, int n, const Vec3* 
     }
   }
   for (; k < count; ++k) scalar_one(x, y, z, n, dirs[k], idx[k], max_dot[k]);
-}
+#else
+  for (int k = 0; k < count; ++k) scalar_one(x, y, z, n, dirs[k], idx[k], max_dot[k]);
 #endif
+}
+
+namespace {
 
 #ifdef WMO_SUPPORT_AVX2
 __attribute__((target("avx2"))) void batch_avx2(const Real* x, const Real* y, const Real* z, int n,
@@ -95,11 +101,7 @@ void support_indices_soa(const Real* x, const Real* y, const Real* z, int n, con
 #ifdef WMO_SUPPORT_AVX2
   if (cpu_has_avx2()) return batch_avx2(x, y, z, n, dirs, count, idx, max_dot);
 #endif
-#ifdef __SSE2__
-  batch_sse2(x, y, z, n, dirs, count, idx, max_dot);
-#else
-  for (int k = 0; k < count; ++k) scalar_one(x, y, z, n, dirs[k], idx[k], max_dot[k]);
-#endif
+  support_indices_soa_sse2(x, y, z, n, dirs, count, idx, max_dot);
 }
 
 }  // namespace wmo::detail

@@ -219,7 +219,8 @@ TEST(ConvexHull, SupportMatchesBruteForce) {
   }
 }
 
-// The vectorised support searches (support_soa.h) against a scalar scan keeping the
+// The vectorised support searches (support_soa.h; the batched one on both of its paths,
+// AVX2 where this CPU has it and SSE2) against a scalar scan keeping the
 // first strict maximum, exactly (same index, same bits of the maximum): point sets of
 // every size around the vector widths (1..9, so every remainder path runs), random
 // directions, and ties (repeated points, axis directions on a cube's corners, where
@@ -258,16 +259,20 @@ TEST(SupportSoa, MatchesFirstMaximumOfScalarScanIncludingTies) {
       std::vector<Vec3> dirs;
       for (int k = 0; k < 11; ++k)
         dirs.push_back(trial % 2 && k < 6 ? Vec3::Unit(k % 3) * (k < 3 ? 1 : -1) : random_unit(rng));
-      std::vector<int> idx(dirs.size());
-      std::vector<Real> mx(dirs.size());
+      std::vector<int> idx(dirs.size()), idx2(dirs.size());
+      std::vector<Real> mx(dirs.size()), mx2(dirs.size());
       detail::support_indices_soa(x.data(), y.data(), z.data(), n, dirs.data(), static_cast<int>(dirs.size()),
                                   idx.data(), mx.data());
+      detail::support_indices_soa_sse2(x.data(), y.data(), z.data(), n, dirs.data(),
+                                       static_cast<int>(dirs.size()), idx2.data(), mx2.data());
       for (std::size_t k = 0; k < dirs.size(); ++k) {
         Real m_ref;
         const int ref = scan(x, y, z, dirs[k], m_ref);
         Real m_one;
         const int one = detail::support_index_soa(x.data(), y.data(), z.data(), n, dirs[k], &m_one);
         EXPECT_EQ(idx[k], ref) << "n " << n << " trial " << trial << " dir " << k;
+        EXPECT_EQ(idx2[k], ref) << "SSE2 path, n " << n << " trial " << trial << " dir " << k;
+        EXPECT_EQ(mx2[k], m_ref);
         EXPECT_EQ(one, ref) << "n " << n << " trial " << trial << " dir " << k;
         EXPECT_EQ(mx[k], m_ref);
         EXPECT_EQ(m_one, m_ref);

@@ -70,4 +70,10 @@ namespace wmo::detail {
 void support_indices_soa(const Real* x, const Real* y, const Real* z, int n, const Vec3* dirs, int count,
                          int* idx, Real* max_dot);
 
+/// The same on the path support_indices_soa takes without AVX2 (SSE2, or scalar where
+/// there is no SSE2), callable on any CPU, so tests check both paths on a machine with
+/// AVX2.
+void support_indices_soa_sse2(const Real* x, const Real* y, const Real* z, int n, const Vec3* dirs, int count,
+                              int* idx, Real* max_dot);
+
 }  // namespace wmo::detail
