@@ -18,6 +18,15 @@ void scalar_one(const Real* x, const Real* y, const Real* z, int n, const Vec3& 
   idx = support_index_soa(x, y, z, n, d, &m);
 }
 
+/// The `lanes` results of one group of directions from k on, out of the stored lane
+/// registers: maxima mv, indices bv (small whole numbers, exact as doubles).
+void write_lanes(int lanes, const double* mv, const double* bv, int k, int* idx, Real* max_dot) {
+  for (int l = 0; l < lanes; ++l) {
+    idx[k + l] = static_cast<int>(bv[l]);
+    max_dot[k + l] = mv[l];
+  }
+}
+
 }  // namespace
 
 void support_indices_soa_sse2(const Real* x, const Real* y, const Real* z, int n, const Vec3* dirs, int count,
@@ -41,10 +50,7 @@ void support_indices_soa_sse2(const Real* x, const Real* y, const Real* z, int n
     alignas(16) double mv[2], bv[2];
     _mm_store_pd(mv, m);
     _mm_store_pd(bv, best);
-    for (int l = 0; l < 2; ++l) {
-      idx[k + l] = static_cast<int>(bv[l]);
-      max_dot[k + l] = mv[l];
-    }
+    write_lanes(2, mv, bv, k, idx, max_dot);
   }
   for (; k < count; ++k) scalar_one(x, y, z, n, dirs[k], idx[k], max_dot[k]);
 #else
@@ -77,10 +83,7 @@ __attribute__((target("avx2"))) void batch_avx2(const Real* x, const Real* y, co
     alignas(32) double mv[4], bv[4];
     _mm256_store_pd(mv, m);
     _mm256_store_pd(bv, best);
-    for (int l = 0; l < 4; ++l) {
-      idx[k + l] = static_cast<int>(bv[l]);
-      max_dot[k + l] = mv[l];
-    }
+    write_lanes(4, mv, bv, k, idx, max_dot);
   }
   for (; k < count; ++k) scalar_one(x, y, z, n, dirs[k], idx[k], max_dot[k]);
 }

@@ -1,7 +1,8 @@
 // Support search over a point set stored as coordinate arrays (x[n], y[n], z[n]):
 // the index of the point maximising dot(p, d), vectorised (SSE2, two points a step)
 // and branch-free. ConvexHull::support_index uses it for hulls up to 32 vertices
-// (ConvexHull::vertex_coords), and so does the hull-hull SAT's face queries.
+// (ConvexHull::vertex_coords), and so does the hull-hull SAT's face queries; the
+// batched form (support_indices_soa) runs many directions in one pass over the points.
 #pragma once
 
 #ifdef __SSE2__
@@ -57,10 +58,6 @@ inline int support_index_soa(const Real* __restrict x, const Real* __restrict y,
   if (max_dot) *max_dot = max_d;
   return best;
 }
-
-}  // namespace wmo::detail
-
-namespace wmo::detail {
 
 /// support_index_soa for `count` directions at once: idx[k] = the first index
 /// maximising dot(p, dirs[k]), max_dot[k] = that maximum, bit for bit as
