@@ -189,16 +189,21 @@ struct VertexSoA {
 };
 
 /// Loads one byte of every cache line of the arrays the queries below read from h
-/// (coordinates, faces, vertices, half-edges for the clipped face, edge records and,
-/// for A, the rings of edges around its vertices that the edge walk follows), all at
-/// once. A broadphase's pairs are rarely in cache, and these loads are independent, so
-/// their misses overlap, where the queries' own loads come one after another (support,
-/// then the edge records, then their faces...). Measured on the narrowphase benchmark's
-/// overlapping hull pairs (20 vertices, a different pair every call, out of cache):
-/// 4.8-5.2 -> 3.9-4.1 us; A's rings and edge records, which only the few walked edges
-/// read (one dependent miss after another), another 5-15% on overlapping pairs (a few
-/// percent more on separated ones); _mm_prefetch on the same lines changed nothing
-/// measurable.
+/// (coordinates, faces, vertices, edge records and, for A, the rings of edges around
+/// its vertices that the edge walk follows), all at once. A broadphase's pairs are
+/// rarely in cache, and these loads are independent, so their misses overlap, where
+/// the queries' own loads come one after another (support, then the edge records, then
+/// their faces...). Measured on the narrowphase benchmark's overlapping hull pairs (20
+/// vertices, a different pair every call, out of cache): 4.8-5.2 -> 3.9-4.1 us; A's
+/// rings and edge records, which only the few walked edges read (one dependent miss
+/// after another), another 5-15% on overlapping pairs (a few percent more on separated
+/// ones); _mm_prefetch on the same lines changed nothing measurable. Not the
+/// half-edges: only the two clipped faces' loops read them, a few of the 27 lines a
+/// 20-vertex hull's take (2.50 -> 2.34 us a query over all classes, 20,000
+/// configurations). Leaving out A's vertices and edge records as well, which the walk
+/// reads only in part, was slower (deep pairs 3.6 -> 4.0 us); so was nothing gained by
+/// reading vertices from the coordinate arrays and planes from a 32-byte array instead
+/// of the 40-byte faces (26 fewer lines a pair).
 inline void touch_hull(const ConvexHull& h, bool rings) {
   unsigned acc = 0;
   auto lines = [&acc](const void* p, std::size_t bytes) {
@@ -208,7 +213,6 @@ inline void touch_hull(const ConvexHull& h, bool rings) {
   lines(h.vertex_coords().data(), h.vertex_coords().size() * sizeof(Real));
   lines(h.faces().data(), h.faces().size() * sizeof(ConvexHull::Face));
   lines(h.vertices().data(), h.vertices().size() * sizeof(Vec3));
-  lines(h.half_edges().data(), h.half_edges().size() * sizeof(ConvexHull::HalfEdge));
   lines(h.edge_arcs().data(), h.edge_arcs().size() * sizeof(ConvexHull::EdgeArc));
   if (rings) {
     lines(h.vertex_edges().data(), h.vertex_edges().size() * sizeof(ConvexHull::VertexEdge));
