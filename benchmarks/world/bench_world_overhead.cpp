@@ -5,7 +5,10 @@
 //    dt 1/60, 4 substeps) against a plain loop over arrays doing the same integration:
 //    per substep v += h g, the centre of mass moves by h times the mean of the old and
 //    new v (a free body's rule in World), the orientation by h w
-//    (integrate_rotation, as the world does). The world also does everything a step
+//    (integrate_rotation, as the world does; it leaves the orientation of a body that
+//    does not turn, as these spheres, unchanged: before it did that, the loop's
+//    quaternion normalisations took 210 of its 313 us, and the ratio below was ~1.9
+//    with the world 1.7x slower). The world also does everything a step
 //    does when nothing touches (broadphase proxies moved, an empty pair query, no
 //    contacts, no solver work, the sleep check), and that overhead is what the ratio
 //    shows.

@@ -106,7 +106,14 @@ inline Mat3 world_inv_inertia(const Quat& q, const Mat3& inv_inertia_local) {
 /// Orientation advanced by angular velocity w (rad/s, world) over h seconds, by the
 /// first-order quaternion update q + h/2 (0, w) q, normalised (Box2D v3 and Bullet use
 /// the same form; its error is O((h |w|)^2) per step and it preserves |q| = 1).
+/// A body that does not turn (w exactly zero) keeps q as it is: the exact answer, where
+/// the update would only renormalise q, at the cost of a square root and four
+/// divisions, most of the cost of integrating a free body (measured: 10,000
+/// free-falling spheres, 4 substeps: bench_world_overhead's plain loop 313 -> 103 us a
+/// step, World::step 586 -> 342 us). Jolt also skips the rotation of a body that does
+/// not turn (below a threshold; this test is exact).
 inline Quat integrate_rotation(const Quat& q, const Vec3& w, Real h) {
+  if ((w.x() == 0) & (w.y() == 0) & (w.z() == 0)) return q;
   const Quat dq(0, 0.5 * h * w.x(), 0.5 * h * w.y(), 0.5 * h * w.z());
   Quat r = q;
   r.coeffs() += (dq * q).coeffs();
