@@ -58,9 +58,12 @@
 // configurations, a different pair of hulls every call, out of cache;
 // `WMO_BENCH_METHODS=wmo_special,fcl,libccd_mpr bench_narrowphase out 4000 hull_hull`,
 // 8 runs): 6.6 us a query before the changes below, 2.0-2.3 us after (FCL, whose
-// libccd MPR depth is off by up to 0.3 m here, 1.6-2.2 us; 1.03-1.10x in the last four
-// runs). Deep overlaps went from 12.0 to ~2.8 us, far pairs from 0.24 to 0.09
-// (WMO_BENCH_BY_CLASS=1). What did it: the
+// libccd MPR depth is off by up to 0.3 m here, 1.6-2.2 us; 1.03-1.10x in four runs,
+// 1.10-1.38x in four later ones on a busier machine, 2.2-2.4 us against 1.6-2.1).
+// Deep overlaps went from 12.0 to ~2.8 us, far pairs from 0.24 to 0.09
+// (WMO_BENCH_BY_CLASS=1). In cache (200 configurations) it is level with FCL,
+// 0.89-1.05x: the rest of the loss is the ~120 lines of hull data a pair reads (see
+// touch_hull), where MPR reads the two vertex arrays. What did it: the
 // edge bound (Gauss-map tests 139 -> 5 a deep call, no square root for edge axes below
 // the bar), the vectorised support searches, GJK only where the margin needs it, the
 // centroid balls, touch_hull. Tried and dropped (no gain or slower, measured): a
