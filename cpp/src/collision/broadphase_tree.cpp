@@ -385,9 +385,15 @@ class AabbTreeBroadphase final : public Broadphase {
 
   Node& node(std::int32_t i) { return nodes_[static_cast<std::size_t>(i)]; }
 
-  /// Every pair of leaves whose fat boxes overlap, once each (first < second), in
-  /// traversal order: a depth-first walk over pairs of subtrees, starting from
-  /// (root, root); a subtree paired with itself splits into its children's pairs.
+  /// Every pair of leaves whose fat boxes overlap, once each (first < second), in no
+  /// particular order (the caller sorts). Two leaves have one lowest common ancestor,
+  /// an internal node with one of them under each child: so the pairs are, for every
+  /// internal node whose two children's boxes overlap, those of the join of the two
+  /// children's subtrees, a depth-first walk over pairs of subtrees. The internal
+  /// nodes are taken in the order of the node array, not by a walk from the root that
+  /// pairs every subtree with itself: no stack round trip for those 10,000 self
+  /// pairs, and the array read in order (measured: 10,000 falling spheres, find_pairs
+  /// 347-357 -> 321-328 us a step on average, three runs each).
   void self_join(std::vector<ProxyPair>& out) {
     if (root_ == kNull) return;
     // A pair of distinct subtrees is pushed only if their boxes overlap (tested where
@@ -396,34 +402,29 @@ class AabbTreeBroadphase final : public Broadphase {
     // falling spheres, the join of a mass move (9,500 candidates) 1.30 -> 0.95 ms.
     // (Pushing without a branch, the top advanced by the test's result, was slower:
     // 1.2 ms; so was nothing gained by renumbering the nodes depth first.)
-    join_stack_.clear();
-    join_stack_.emplace_back(root_, root_);
     auto push = [&](std::int32_t a, const Aabb& box_a, std::int32_t b, const Aabb& box_b) {
       if (box_a.overlaps(box_b)) join_stack_.emplace_back(a, b);
     };
-    while (!join_stack_.empty()) {
-      const auto [x, y] = join_stack_.back();
-      join_stack_.pop_back();
-      const Node& nx = node(x);
-      if (x == y) {
-        if (nx.is_leaf()) continue;
-        const Node& c1 = node(nx.child1);
-        const Node& c2 = node(nx.child2);
-        push(nx.child1, c1.box, nx.child2, c2.box);
-        if (!c2.is_leaf()) join_stack_.emplace_back(nx.child2, nx.child2);
-        if (!c1.is_leaf()) join_stack_.emplace_back(nx.child1, nx.child1);
-        continue;
-      }
-      const Node& ny = node(y);  // overlaps nx (tested at the push)
-      if (nx.is_leaf() && ny.is_leaf()) {
-        const ProxyId a = nx.proxy(), b = ny.proxy();
-        out.emplace_back(std::min(a, b), std::max(a, b));
-      } else if (ny.is_leaf() || (!nx.is_leaf() && nx.height >= ny.height)) {
-        push(nx.child2, node(nx.child2).box, y, ny.box);
-        push(nx.child1, node(nx.child1).box, y, ny.box);
-      } else {
-        push(x, nx.box, ny.child2, node(ny.child2).box);
-        push(x, nx.box, ny.child1, node(ny.child1).box);
+    join_stack_.clear();
+    for (std::size_t i = 0; i < nodes_.size(); ++i) {
+      const Node& n = nodes_[i];
+      if (n.height <= 0) continue;  // a leaf (0) or a free node (-1)
+      push(n.child1, node(n.child1).box, n.child2, node(n.child2).box);
+      while (!join_stack_.empty()) {
+        const auto [x, y] = join_stack_.back();
+        join_stack_.pop_back();
+        const Node& nx = node(x);
+        const Node& ny = node(y);  // overlaps nx (tested at the push)
+        if (nx.is_leaf() && ny.is_leaf()) {
+          const ProxyId a = nx.proxy(), b = ny.proxy();
+          out.emplace_back(std::min(a, b), std::max(a, b));
+        } else if (ny.is_leaf() || (!nx.is_leaf() && nx.height >= ny.height)) {
+          push(nx.child2, node(nx.child2).box, y, ny.box);
+          push(nx.child1, node(nx.child1).box, y, ny.box);
+        } else {
+          push(x, nx.box, ny.child2, node(ny.child2).box);
+          push(x, nx.box, ny.child1, node(ny.child1).box);
+        }
       }
     }
   }
