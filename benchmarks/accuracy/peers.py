@@ -102,10 +102,12 @@ def pybullet_case(case: str, dt: float, iterations: int):
             b = w.box((0.5, 0.5, 0.5), (0, 0.5, 0), 1000.0, 0.5, velocity=(v0, 0, 0))
             ms = w.run(3.0)
             return ms, abs(w.pos(b)[0] - v0 * v0 / (2 * mu * G))
-        if case in ("stack10", "pyramid10"):
-            if case == "stack10":
-                pos = [(0.0, 0.5 + k, 0.0) for k in range(10)]
-                masses = [1000.0] * 10
+        if case in ("stack10", "tower30", "pyramid10"):
+            seconds = 20.0 if case == "tower30" else 5.0
+            if case != "pyramid10":
+                n = 30 if case == "tower30" else 10
+                pos = [(0.0, 0.5 + k, 0.0) for k in range(n)]
+                masses = [1000.0] * n
                 friction = math.sqrt(0.6)
             else:
                 spec = scenes.pyramid_spec(10)
@@ -113,7 +115,7 @@ def pybullet_case(case: str, dt: float, iterations: int):
             w.ground(friction)
             ids = [w.box((0.5, 0.5, 0.5), p, m, friction) for p, m in zip(pos, masses)]
             p0 = np.array([w.pos(b) for b in ids])
-            ms = w.run(5.0)
+            ms = w.run(seconds)
             p1 = np.array([w.pos(b) for b in ids])
             return ms, float(np.linalg.norm(p1 - p0, axis=1).max())
     finally:
@@ -157,14 +159,16 @@ def mujoco_case(case: str, dt: float, iterations: int):
         xml = _mujoco_boxes([(0.0, 0.5, 0.0)], [1000.0], mu, dt, iterations)
         ms, _, data = _mujoco_run(xml, 3.0, dt, init=lambda d: d.qvel.__setitem__(0, v0))
         return ms, abs(float(data.qpos[0]) - v0 * v0 / (2 * mu * G))
-    if case in ("stack10", "pyramid10"):
-        if case == "stack10":
-            pos, masses = [(0.0, 0.5 + k, 0.0) for k in range(10)], [1000.0] * 10
+    if case in ("stack10", "tower30", "pyramid10"):
+        seconds = 20.0 if case == "tower30" else 5.0
+        if case != "pyramid10":
+            n = 30 if case == "tower30" else 10
+            pos, masses = [(0.0, 0.5 + k, 0.0) for k in range(n)], [1000.0] * n
         else:
             spec = scenes.pyramid_spec(10)
             pos, masses = [tuple(map(float, p)) for p in spec.positions], [float(m) for m in spec.masses]
         xml = _mujoco_boxes(pos, masses, 0.6, dt, iterations)
-        ms, model, data = _mujoco_run(xml, 5.0, dt)
+        ms, model, data = _mujoco_run(xml, seconds, dt)
         p1 = data.qpos.reshape(-1, 7)[:, :3]
         return ms, float(np.linalg.norm(p1 - np.array(pos), axis=1).max())
     return None

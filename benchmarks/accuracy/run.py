@@ -16,6 +16,10 @@ Cases (the error is in metres or a relative number, as stated):
            stopping distance against v^2 / (2 mu g) (m).
   stack10  10 unit boxes stacked face to face, 5 s: the largest displacement of a box
            centre (m; a standing stack stays at the millimetre level).
+  tower30  30 unit boxes stacked face to face (scenes.tower), 20 s: the same measure. At
+           the defaults it buckles (an elastic column under its own weight, see
+           SolverSettings::contact_hertz), so this is where the knobs' cost to hold a
+           tall stack shows, next to the peers' (a fallen tower: tens of metres).
   pyramid10  the SCENES.md pyramid with 10 layers (385 boxes), 5 s: the same measure.
   energy   20 spheres and 20 boxes fired around a closed box of static walls, no gravity,
            friction, restitution or damping, 10 s: the largest one-step rise of the
@@ -25,7 +29,7 @@ Cases (the error is in metres or a relative number, as stated):
 Writes results/accuracy/accuracy.csv (one row per engine, case and setting) and one PNG
 per case (error against cost, one series per engine and knob; a peer that is not
 installed is skipped and said so). Usage:
-.venv/bin/python benchmarks/accuracy/run.py [--out DIR] [--quick] [--no-peers]
+.venv/bin/python benchmarks/accuracy/run.py [--out DIR] [--quick] [--no-peers] [--cases tower30,...]
 """
 from __future__ import annotations
 
@@ -126,6 +130,13 @@ def case_stack(s, n=10):
     return ms, float(np.linalg.norm(w.positions - p0, axis=1).max())
 
 
+def case_tower(s, n=30):
+    w = scenes.tower(n, sleeping=False, **world_settings(s))
+    p0 = np.array(w.positions)
+    ms, _ = run_for(w, 20.0, s["dt"])
+    return ms, float(np.linalg.norm(w.positions - p0, axis=1).max())
+
+
 def case_pyramid(s, layers=10):
     w = scenes.pyramid(layers, sleeping=False, **world_settings(s))
     p0 = np.array(w.positions)
@@ -147,7 +158,8 @@ def case_energy(s):
 
 
 CASES = {"bounce": (case_bounce, "relative error of e^2 h"), "slide": (case_slide, "stopping distance error (m)"),
-         "stack10": (case_stack, "largest displacement (m)"), "pyramid10": (case_pyramid, "largest displacement (m)"),
+         "stack10": (case_stack, "largest displacement (m)"),
+         "tower30": (case_tower, "largest displacement (m)"), "pyramid10": (case_pyramid, "largest displacement (m)"),
          "energy": (case_energy, "largest one-step energy rise (relative)")}
 
 
@@ -156,8 +168,14 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("results/accuracy"))
     ap.add_argument("--quick", action="store_true", help="the two cheapest cases and fewer settings")
     ap.add_argument("--no-peers", action="store_true", help="WMO only")
+    ap.add_argument("--cases", help=f"comma-separated subset of {','.join(CASES)} (default: all)")
     args = ap.parse_args()
     cases = ["bounce", "slide"] if args.quick else list(CASES)
+    if args.cases:
+        cases = [c for c in args.cases.split(",") if c]
+        unknown = [c for c in cases if c not in CASES]
+        if unknown:
+            ap.error(f"unknown case(s) {unknown}; known: {list(CASES)}")
     sweeps = {k: v[:3] for k, v in SWEEPS.items()} if args.quick else SWEEPS
     args.out.mkdir(parents=True, exist_ok=True)
     rows = []
