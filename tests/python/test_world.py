@@ -256,6 +256,43 @@ def test_sleeping_island_wakes_on_impulse_and_on_a_written_velocity():
     assert world.awake_count == 2
 
 
+def test_bodies_in_flight_pass_the_sleep_test_and_sleep_where_they_land():
+    # update_sleep passes over bodies in free flight when gravity changes their velocity
+    # by more than twice the sleep threshold a step (10 / 60 > 2 x 0.05 m/s): they
+    # cannot be slow at both ends of a step. What must not change: a ball thrown
+    # straight up is exactly at rest at the top of its flight (v0 = 10 m/s, g = 10,
+    # dt = 1/60: 0 after 60 steps, to rounding) and does not fall asleep there; it
+    # sleeps time_to_sleep after it lands; the stage still counts every awake body;
+    # bodies whose gravity is scaled to zero or nearly (nothing to pass over: they
+    # can be slow for long) fall asleep where they float.
+    world, box = ground_and_box()
+    ball = world.add_body(wmo.Sphere(0.25), position=(3, 0.25, 0), mass=1.0, linear_velocity=(0, 10, 0))
+    far = [world.add_body(wmo.Sphere(0.1), position=(10 + 2 * k, 500, 0), mass=1.0) for k in range(8)]
+    for step in range(1, 151):
+        world.step()
+        assert world.profile["update_sleep"]["count"] == world.awake_count
+        if step <= 110:  # in the air: 2 s of flight, touching down at step 120
+            assert not ball.sleeping
+        if step == 60:
+            assert abs(ball.linear_velocity[1]) < 1e-9  # the top: at rest, still awake
+    assert not any(f.sleeping for f in far)
+    landed = 120
+    for step in range(151, 400):
+        world.step()
+        if ball.sleeping:
+            break
+    # Slow from a few steps after touching down, asleep 0.5 s (30 steps) later.
+    assert ball.sleeping and landed + 30 <= step <= landed + 60, step
+    assert not any(f.sleeping for f in far)
+
+    for scale in (0.0, 1e-3):
+        w = wmo.World(gravity=(0, -10, 0), dt=1 / 60)
+        falling = w.add_body(wmo.Sphere(0.1), position=(0, 100, 0), mass=1.0)
+        floating = w.add_body(wmo.Sphere(0.1), position=(5, 100, 0), mass=1.0, gravity_scale=scale)
+        w.step(40)  # 0.67 s: the floating body (at most 6.7 mm/s) slow all along
+        assert floating.sleeping and not falling.sleeping, scale
+
+
 def test_bad_sleep_settings_raise():
     with pytest.raises(ValueError, match="time_to_sleep"):
         wmo.World(time_to_sleep=0.0)

@@ -634,6 +634,14 @@ class World {
   std::vector<std::int32_t> free_islands_;
   std::vector<std::int32_t> island_parent_, island_of_root_;  // update_sleep scratch, per row
   std::vector<Real> sleep_scratch_;
+  // This step's runs [begin, end) of plain free bodies (integrate_plain_run), which
+  // update_sleep may pass over (see there); cleared at the start of every step.
+  std::vector<std::pair<int, int>> plain_runs_;
+  // Smallest |gravity_scale| of any body added so far (a bound: not raised by removals).
+  Real min_abs_gravity_scale_ = kInf;
+  // True when every awake dynamic body's sleep timer is 0 (set by update_sleep; new
+  // and woken bodies start at 0, so they keep it true).
+  bool awake_timers_zero_ = true;
 
   std::vector<Slot> slots_;
   std::vector<std::int32_t> free_slots_;
