@@ -238,6 +238,26 @@ def test_collide_mesh_sphere():
     assert G.collide_all(mesh, ORIGIN, ball, pose(1.0, 0.6, -1.0)) == []
 
 
+@pytest.mark.parametrize("tilt, y", [(0.3, 0.1), (0.6, 0.05), (1.0, 0.1), (1.0, -0.05), (1.3, -0.05), (0.0, -0.05)])
+def test_collide_mesh_capsule_through_the_plane_is_pushed_out_the_near_side(tilt, y):
+    # A capsule (radius 0.2, half-height 0.3) tilted about x, its core through the
+    # quad's plane, its centre 0.14 m from the diagonal that the two triangles share.
+    # GJK / EPA's shortest way out of either triangle alone is sideways through that
+    # internal edge; the contact must instead push the capsule out of the plane on the
+    # side through which less of it has to pass, and both triangles must agree. Before:
+    # tilt 0.3 at y = 0.1 was pushed down by 0.587 (through the floor), and at tilt 1.0,
+    # y = -0.05 the triangles took opposite sides and reported nothing.
+    cap = wmo.Capsule(0.2, 0.3)
+    ms = G.collide_all(quad_mesh(), ORIGIN, cap, pose(0.5, y, 0.3, quat_axis_angle((1, 0, 0), tilt)))
+    reach = 0.3 * math.cos(tilt)  # the core's ends at y -+ reach
+    below, above = 0.2 + reach - y, 0.2 + reach + y  # depth out the top, out the bottom
+    side, depth = (1, below) if below < above else (-1, above)
+    assert ms, "no contact for a capsule through the mesh"
+    for m in ms:
+        np.testing.assert_allclose(m.normal, [0, side, 0], atol=TOL)
+    assert max(max(m.depths) for m in ms) == pytest.approx(depth, abs=1e-9)
+
+
 # ---------------------------------------------------------------- unsupported pairs
 
 @pytest.mark.parametrize("a, b", [

@@ -330,6 +330,29 @@ void collide_triangle(const MeshContext& ctx, int t, std::vector<Manifold>& out)
       N = adjusted;
       modified = true;
     }
+    if (modified && std::abs(N.dot(n)) >= 1 - sin_tol) {
+      // N became T's face normal (a face, internal edge or internal vertex feature), on
+      // the side the leaning of GJK / EPA's normal chose. That normal is the shortest
+      // way out of T alone, often sideways through an internal edge, and its slight
+      // lean up or down says nothing about which side B is on: a capsule tilted
+      // across a flat grid, its centre 0.1 m above it and its core through it, was
+      // pushed down, through the ground (depth 0.59 m instead of 0.39), and the two
+      // triangles by the diagonal it crossed chose opposite sides, so that neither
+      // kept a point and the capsule fell through. The side is the one through which
+      // less of B must pass, T's plane taken whole: the depth of B's lowest point below
+      // it against that of its highest point above it (support points, radius
+      // included); B's centre decides a tie. Every triangle of a flat patch then
+      // agrees.
+      const Real offset = n.dot(v[0]);
+      auto reach = [&](const Vec3& d) {  // max over B of d.x, mesh frame
+        return d.dot(ctx.b_in_a.transform_point(ctx.b.support_core(ctx.rot.transpose() * d))) + ctx.b.radius();
+      };
+      const Real below = offset + reach(-n);  // how far B reaches below T's plane
+      const Real above = reach(n) - offset;   // ... and above it
+      const Real tie = 1e-9 * (std::abs(below) + std::abs(above));
+      const int side = below < above - tie ? 1 : (above < below - tie ? -1 : centre_side);
+      N = side * n;
+    }
   }
 
   // ---- Manifold along N. ----
