@@ -7,7 +7,7 @@ any step (World.max_penetration: the step's contact pairs collided again at its 
 poses) and the wall time of the steps. The scene is chaotic: a change that should not
 matter moves these maxima by a centimetre or more. Settings are World keywords:
 
-    .venv/bin/python benchmarks/ccd/penetration.py                       # defaults: 0.663 m
+    .venv/bin/python benchmarks/ccd/penetration.py                       # defaults: 0.828 m
     .venv/bin/python benchmarks/ccd/penetration.py --ccd all             # 0.076 m (overlap
         # projection; 0.41 m with the shock pass alone)
     .venv/bin/python benchmarks/ccd/penetration.py --set iterations=10   # 0.715 m

@@ -59,8 +59,8 @@ def rotate_y_to(axis: str) -> tuple:
 
 # ---- a 0.05 m ball at 500 m/s against a 1 cm plate ----------------------------------
 
-def ball_and_plate(ccd: bool, restitution: float = 0.0, gravity=(0.0, 0.0, 0.0)):
-    w = wmo.World(gravity=gravity, dt=DT)
+def ball_and_plate(ccd: bool, restitution: float = 0.0, gravity=(0.0, 0.0, 0.0), **world_kw):
+    w = wmo.World(gravity=gravity, dt=DT, **world_kw)
     w.add_body(wmo.Box((1.0, 0.005, 1.0)), kind="static", restitution=restitution)
     ball = w.add_body(wmo.Sphere(0.05), position=(0.0, 3.0, 0.0), linear_velocity=(0.0, -500.0, 0.0),
                       restitution=restitution, ccd=ccd)
@@ -68,9 +68,20 @@ def ball_and_plate(ccd: bool, restitution: float = 0.0, gravity=(0.0, 0.0, 0.0))
 
 
 def test_ball_passes_through_the_plate_without_ccd():
-    w, ball = ball_and_plate(ccd=False)
+    # Discrete only (no CCD, no speculative margin against static geometry).
+    w, ball = ball_and_plate(ccd=False, speculative_motion_static=0.0)
     w.step(2)
     assert ball.position[1] < -5  # 8.3 m per step: it never touched the plate
+
+
+def test_ball_stops_at_the_plate_by_the_static_speculative_margin_alone():
+    # Without CCD but with the default speculative_motion_static = 1: the ball's
+    # broadphase box is swept along its step, the pair with the plate exists, and the
+    # speculative contact stops the ball on the plate's face (no rotation to miss).
+    w, ball = ball_and_plate(ccd=False)
+    w.step(3)
+    assert ball.position[1] == pytest.approx(0.005 + 0.05, abs=1e-6)
+    assert abs(ball.linear_velocity[1]) < 1e-6
 
 
 @pytest.mark.parametrize("restitution", [0.0, 0.8])
@@ -132,15 +143,15 @@ def test_putting_a_body_back_adds_no_energy():
 
 # ---- a 1 mm box falling from 100 m onto a 1 mm plate --------------------------------
 
-def thin_box_on_plate(ccd: bool):
-    w = wmo.World(gravity=(0, -9.81, 0), dt=DT)
+def thin_box_on_plate(ccd: bool, **world_kw):
+    w = wmo.World(gravity=(0, -9.81, 0), dt=DT, **world_kw)
     w.add_body(wmo.Box((0.5, 0.0005, 0.5)), kind="static")
     box = w.add_body(wmo.Box((0.1, 0.0005, 0.1)), position=(0.0, 100.0, 0.0), mass=0.05, ccd=ccd)
     return w, box
 
 
 def test_thin_box_falls_through_the_thin_plate_without_ccd():
-    w, box = thin_box_on_plate(ccd=False)
+    w, box = thin_box_on_plate(ccd=False, speculative_motion_static=0.0)  # discrete only
     w.step(5 * 60)  # ~4.5 s to fall 100 m, at ~44 m/s (0.74 m per step)
     assert box.position[1] < -10
 
@@ -200,9 +211,12 @@ def test_one_ccd_sphere_is_enough_for_a_fast_pair():
 def test_fast_kinematic_bat_hits_a_resting_ccd_ball():
     """A kinematic bat at 100 m/s (1.67 m a step) towards a ball at rest: without CCD it
     jumps over the ball; with CCD on the ball (the bat's motion is known, so its
-    broadphase box is swept and the sweep follows it) the ball is carried ahead of it."""
+    broadphase box is swept and the sweep follows it) the ball is carried ahead of it.
+    (Discrete without CCD: speculative_motion_static = 0; at its default, 1, the bat's
+    box is swept too and the pair's speculative contact catches the ball: the next
+    test.)"""
     for ccd in (False, True):
-        w = wmo.World(gravity=(0, 0, 0), dt=DT)
+        w = wmo.World(gravity=(0, 0, 0), dt=DT, speculative_motion_static=0.0)
         bat = w.add_body(wmo.Box((0.05, 0.5, 0.5)), position=(-3.0, 0.0, 0.0), kind="kinematic",
                          linear_velocity=(100.0, 0.0, 0.0))
         ball = w.add_body(wmo.Sphere(0.1), mass=0.1, ccd=ccd)
@@ -256,8 +270,8 @@ def test_spinning_rod_hits_the_wall_with_ccd():
 
 # ---- a fast box against a triangle-mesh floor --------------------------------------
 
-def mesh_floor(ccd: bool):
-    w = wmo.World(gravity=(0, -9.81, 0), dt=DT)
+def mesh_floor(ccd: bool, **world_kw):
+    w = wmo.World(gravity=(0, -9.81, 0), dt=DT, **world_kw)
     v = [[-5.0, 0.0, -5.0], [5.0, 0.0, -5.0], [5.0, 0.0, 5.0], [-5.0, 0.0, 5.0]]
     w.add_body(wmo.TriangleMesh(v, [[0, 2, 1], [0, 3, 2]]), kind="static")
     box = w.add_body(wmo.Box((0.1, 0.1, 0.1)), position=(0.3, 5.0, -0.2), linear_velocity=(0.0, -80.0, 0.0),
@@ -265,10 +279,24 @@ def mesh_floor(ccd: bool):
     return w, box
 
 
-def test_fast_box_passes_through_the_mesh_floor_without_ccd():
-    w, box = mesh_floor(ccd=False)
+def test_fast_box_passes_through_the_mesh_floor_without_any_continuous_treatment():
+    # No CCD and no speculative margin against static geometry: the 80 m/s box
+    # (1.3 m a step) is never paired with the floor in time and falls through.
+    w, box = mesh_floor(ccd=False, speculative_motion_static=0.0)
     w.step(10)
     assert box.position[1] < -5
+
+
+def test_fast_box_lands_on_the_mesh_floor_by_speculative_contacts_alone():
+    # The default speculative_motion_static = 1 sweeps the box's broadphase box along
+    # its step, so its pair with the floor exists the step before it would reach it,
+    # and the speculative contact stops it on the surface (measured: lowest centre
+    # 0.09988 m, a half-extent above the floor to 1.2e-4 m) without CCD.
+    w, box = mesh_floor(ccd=False)
+    lowest = []
+    run(w, 120, lambda w: lowest.append(box.position[1]))
+    assert min(lowest) > 0.1 - 0.1 * 0.05
+    assert box.position[1] == pytest.approx(0.1, abs=0.01)
 
 
 def test_fast_box_lands_on_the_mesh_floor_with_ccd():
@@ -299,8 +327,22 @@ def test_slow_ccd_bodies_take_the_ordinary_path():
     np.testing.assert_array_equal(states[False], states[True])
 
 
+def test_fast_kinematic_bat_carries_a_resting_ball_by_the_static_speculative_margin():
+    # No CCD anywhere: the kinematic bat's box is swept along its step (the default
+    # speculative_motion_static = 1 covers pairs with kinematic bodies), so the pair
+    # exists before the bat reaches the ball, and the ball is carried ahead of it.
+    w = wmo.World(gravity=(0, 0, 0), dt=DT)
+    bat = w.add_body(wmo.Box((0.05, 0.5, 0.5)), position=(-3.0, 0.0, 0.0), kind="kinematic",
+                     linear_velocity=(100.0, 0.0, 0.0))
+    ball = w.add_body(wmo.Sphere(0.1), mass=0.1)
+    w.step(4)
+    assert ball.linear_velocity[0] == pytest.approx(100.0, rel=1e-6)
+    assert ball.position[0] >= bat.position[0] + 0.05 + 0.1 - 0.1 * 0.05
+
+
 def test_the_world_switch_turns_ccd_off():
-    w = wmo.World(gravity=(0, 0, 0), dt=DT, ccd=False)
+    # speculative_motion_static = 0 so that nothing but CCD could stop the ball.
+    w = wmo.World(gravity=(0, 0, 0), dt=DT, ccd=False, speculative_motion_static=0.0)
     assert w.ccd is False
     w.add_body(wmo.Box((1.0, 0.005, 1.0)), kind="static")
     ball = w.add_body(wmo.Sphere(0.05), position=(0.0, 3.0, 0.0), linear_velocity=(0.0, -500.0, 0.0), ccd=True)

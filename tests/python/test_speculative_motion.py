@@ -8,10 +8,13 @@ import pytest
 import wmo
 
 
-def _shoot_at_plate(speed, motion, radius=0.05, half_thickness=0.005):
+def _shoot_at_plate(speed, motion, radius=0.05, half_thickness=0.005, static=0.0):
     """A sphere fired straight down at a static plate 1 cm thick (no gravity, dt 1/60);
-    returns the sphere's lowest centre height and its final velocity."""
-    w = wmo.World(gravity=(0, 0, 0), speculative_motion=motion, sleeping=False)
+    returns the sphere's lowest centre height and its final velocity. `static` is
+    speculative_motion_static (0 here unless given: the plate is static, so its
+    default, 1, would stop the sphere whatever `motion` is)."""
+    w = wmo.World(gravity=(0, 0, 0), speculative_motion=motion, speculative_motion_static=static,
+                  sleeping=False)
     w.add_body(wmo.Box((1, half_thickness, 1)), kind="static")
     b = w.add_body(wmo.Sphere(radius), position=(0, 3.0, 0), linear_velocity=(0, -speed, 0), mass=1.0)
     lowest = np.inf
@@ -27,11 +30,36 @@ def test_fast_sphere_stops_at_a_thin_plate(speed):
     # plus the fixed 4 cm margin, so without motion margins the sphere passes through.
     lowest, _ = _shoot_at_plate(speed, 0.0)
     assert lowest < -1.0
-    lowest, v = _shoot_at_plate(speed, 1.0)
     # Stopped on the plate's top face (y = 0.005 + radius 0.05), never behind it; the
-    # soft contact lets it settle into the surface by at most a millimetre.
-    assert lowest == pytest.approx(0.055, abs=1e-3)
-    np.testing.assert_allclose(v, 0.0, atol=1e-6)
+    # soft contact lets it settle into the surface by at most a millimetre: with the
+    # margin for every pair, and with the one for pairs with static geometry alone.
+    for motion, static in ((1.0, 0.0), (0.0, 1.0)):
+        lowest, v = _shoot_at_plate(speed, motion, static=static)
+        assert lowest == pytest.approx(0.055, abs=1e-3)
+        np.testing.assert_allclose(v, 0.0, atol=1e-6)
+
+
+@pytest.mark.parametrize("floor", ["box", "mesh"])
+def test_ball_falling_faster_than_the_fixed_margin_lands_on_a_thin_floor(floor):
+    # dt 1/30, dropped from 10 m: 14 m/s, 0.47 m a step at the floor. Its centre was
+    # 0.386 m above the floor at one step (0.146 m between the broadphase boxes) and
+    # below it at the next, so the pair never existed and it fell through (every time,
+    # a 2 cm box or a two-triangle mesh) until the broadphase boxes were swept by the
+    # static motion margin: the pair is found the step before, the speculative contact
+    # stops the ball on the floor.
+    for static in (0.0, 1.0):
+        w = wmo.World(gravity=(0, -9.81, 0), dt=1 / 30, speculative_motion_static=static)
+        if floor == "box":
+            w.add_body(wmo.Box((8, 0.01, 8)), position=(0, -0.01, 0), kind="static")
+        else:
+            v = [(-8, 0, -8), (8, 0, -8), (8, 0, 8), (-8, 0, 8)]
+            w.add_body(wmo.TriangleMesh(v, [(0, 2, 1), (0, 3, 2)]), kind="static")
+        b = w.add_body(wmo.Sphere(0.2), position=(0, 10, 0))
+        w.step(90)
+        if static == 0.0:
+            assert b.position[1] < -10
+        else:
+            assert b.position[1] == pytest.approx(0.2, abs=2e-3)
 
 
 def test_fast_spheres_meeting_head_on_collide():
