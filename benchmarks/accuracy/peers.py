@@ -22,6 +22,10 @@ from wmo import scenes
 G = 10.0
 
 
+#: The stacked-box cases of run.py: (boxes, simulated seconds); pyramid10 runs 5 s.
+STACKS = {"stack10": (10, 5.0), "tower30": (30, 20.0)}
+
+
 # ---- PyBullet --------------------------------------------------------------------------
 
 class _Bullet:
@@ -102,10 +106,9 @@ def pybullet_case(case: str, dt: float, iterations: int):
             b = w.box((0.5, 0.5, 0.5), (0, 0.5, 0), 1000.0, 0.5, velocity=(v0, 0, 0))
             ms = w.run(3.0)
             return ms, abs(w.pos(b)[0] - v0 * v0 / (2 * mu * G))
-        if case in ("stack10", "tower30", "pyramid10"):
-            seconds = 20.0 if case == "tower30" else 5.0
-            if case != "pyramid10":
-                n = 30 if case == "tower30" else 10
+        if case in STACKS or case == "pyramid10":
+            n, seconds = STACKS.get(case, (0, 5.0))
+            if case in STACKS:
                 pos = [(0.0, 0.5 + k, 0.0) for k in range(n)]
                 masses = [1000.0] * n
                 friction = math.sqrt(0.6)
@@ -159,10 +162,9 @@ def mujoco_case(case: str, dt: float, iterations: int):
         xml = _mujoco_boxes([(0.0, 0.5, 0.0)], [1000.0], mu, dt, iterations)
         ms, _, data = _mujoco_run(xml, 3.0, dt, init=lambda d: d.qvel.__setitem__(0, v0))
         return ms, abs(float(data.qpos[0]) - v0 * v0 / (2 * mu * G))
-    if case in ("stack10", "tower30", "pyramid10"):
-        seconds = 20.0 if case == "tower30" else 5.0
-        if case != "pyramid10":
-            n = 30 if case == "tower30" else 10
+    if case in STACKS or case == "pyramid10":
+        n, seconds = STACKS.get(case, (0, 5.0))
+        if case in STACKS:
             pos, masses = [(0.0, 0.5 + k, 0.0) for k in range(n)], [1000.0] * n
         else:
             spec = scenes.pyramid_spec(10)

@@ -123,18 +123,15 @@ def case_slide(s):
     return ms, abs(b.position[0] - v0 * v0 / (2 * mu * G))
 
 
-def case_stack(s, n=10):
+def case_stack(s, n=10, seconds=5.0):
     w = scenes.tower(n, sleeping=False, **world_settings(s))
     p0 = np.array(w.positions)
-    ms, _ = run_for(w, 5.0, s["dt"])
+    ms, _ = run_for(w, seconds, s["dt"])
     return ms, float(np.linalg.norm(w.positions - p0, axis=1).max())
 
 
-def case_tower(s, n=30):
-    w = scenes.tower(n, sleeping=False, **world_settings(s))
-    p0 = np.array(w.positions)
-    ms, _ = run_for(w, 20.0, s["dt"])
-    return ms, float(np.linalg.norm(w.positions - p0, axis=1).max())
+def case_tower(s):
+    return case_stack(s, n=30, seconds=20.0)
 
 
 def case_pyramid(s, layers=10):
