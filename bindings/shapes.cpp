@@ -241,18 +241,29 @@ Concave triangle mesh for static geometry (not solid: no mass properties).
 Args:
     vertices: (V, 3) real array, metres.
     triangles: (T, 3) integer array of vertex indices, CCW seen from outside.
+    one_sided: False (default): every triangle is a two-sided sheet of zero thickness,
+        and a body is pushed out on whichever side less of it has passed through.
+        True: the mesh is the surface of a solid lying behind it (terrain, or a closed
+        mesh wound outwards): a body overlapping a triangle is always pushed out
+        through its front, along its normal, however deep it is, and a body behind a
+        triangle that does not touch it is ignored. Use it for ground meshes: on a
+        two-sided one a body driven past the plane (fast, thin, spinning, or pressed
+        by a pile) is pushed out below and falls. Ray casts and distance queries see
+        both sides either way.
 
 Raises:
     TypeError: wrong shapes or a non-integer triangles array.
     ValueError: non-finite vertices, out-of-range indices, an empty mesh or a
         degenerate (zero-area) triangle.
 )doc")
-      .def(py::init([](py::handle vertices, py::handle triangles) {
+      .def(py::init([](py::handle vertices, py::handle triangles, bool one_sided) {
              std::vector<Vec3> v = to_points(vertices, "vertices");
              auto t = to_triangles(triangles, static_cast<py::ssize_t>(v.size()));
-             return std::make_shared<TriangleMesh>(std::move(v), std::move(t));
+             return std::make_shared<TriangleMesh>(std::move(v), std::move(t), one_sided);
            }),
-           py::arg("vertices"), py::arg("triangles"))
+           py::arg("vertices"), py::arg("triangles"), py::arg("one_sided") = false)
+      .def_property_readonly("one_sided", &TriangleMesh::one_sided,
+                             "True if the mesh is the surface of a solid behind it (see the constructor).")
       .def_property_readonly(
           "vertices",
           [](py::handle self) {
@@ -278,7 +289,8 @@ Raises:
           "(T, 3) unit triangle normals.")
       .def("__repr__", [](const TriangleMesh& mesh) {
         return "TriangleMesh(" + std::to_string(mesh.vertices().size()) + " vertices, " +
-               std::to_string(mesh.triangles().size()) + " triangles)";
+               std::to_string(mesh.triangles().size()) + " triangles" + (mesh.one_sided() ? ", one_sided" : "") +
+               ")";
       });
 
   py::class_<Plane, Shape, std::shared_ptr<Plane>>(m, "Plane", R"doc(

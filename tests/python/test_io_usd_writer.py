@@ -185,7 +185,8 @@ def test_filtering_groups_compounds_and_settings_round_trip(tmp_path):
                    collision_group=2, center_of_mass=(0.01, 0.02, 0.0))
     b = w.add_body(wmo.Box((0.3, 0.3, 0.3), rounding=0.05), position=(0, 0, 2), collision_group=2)
     c = w.add_body(wmo.Cylinder(0.2, 0.3), position=(1, 0, 1), kind="kinematic", angular_velocity=(0, 0, 1))
-    w.add_body(wmo.TriangleMesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]]), position=(3, 3, 0), kind="static")
+    w.add_body(wmo.TriangleMesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], one_sided=True), position=(3, 3, 0),
+               kind="static")
     w.set_pair_collision(a, b, False)
     w.set_pair_collision(b, c, False)
     w.set_group_collision(2, 7, False)
@@ -201,6 +202,7 @@ def test_filtering_groups_compounds_and_settings_round_trip(tmp_path):
     assert np.array_equal(w2.body(1).center_of_mass, a.center_of_mass)
     assert w2.body(2).shape.rounding == 0.05 and w2.body(3).kind == "kinematic"
     assert len(w2.body(1).shape.children) == 2
+    assert w2.body(4).shape.one_sided
     assert wmo.state_hash(w2) == wmo.state_hash(w)
     w.step(120)
     w2.step(120)

@@ -115,6 +115,8 @@ def test_scene_model_ids_follow_the_worlds_swap_remove():
         {"shape": {"type": "compound", "children": [{"shape": {"type": "sphere", "radius": 1}}]}}]}}, "bad_args"),
     ("add_body", {"shape": {"type": "compound", "children": [{"shape": BOX, "position": [0, 1]}]}}, "bad_args"),
     ("add_body", {"shape": {"type": "compound", "children": [{"shape": BOX}] * 257}}, "limit"),
+    ("add_body", {"shape": {"type": "triangle_mesh", "vertices": [[0, 0, 0], [1, 0, 0], [0, 0, 1]],
+                            "triangles": [[0, 2, 1]], "one_sided": "yes"}, "kind": "static"}, "bad_args"),
     ("fly", {}, "unknown_op"),
 ])
 def test_a_bad_edit_names_the_problem_and_leaves_the_scene_unchanged(op, args, code):

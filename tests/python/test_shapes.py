@@ -104,10 +104,22 @@ def test_triangle_mesh_views():
     np.testing.assert_array_equal(mesh.triangles, tris)
     assert mesh.triangles.dtype == np.int32 and not mesh.triangles.flags.writeable
     np.testing.assert_allclose(mesh.triangle_normals, [[0, 0, 1], [0, 0, 1]], atol=1e-15)
+    assert not mesh.one_sided and "one_sided" not in repr(mesh)
+    one = wmo.TriangleMesh(verts, tris, one_sided=True)
+    assert one.one_sided and repr(one) == "TriangleMesh(4 vertices, 2 triangles, one_sided)"
     v = mesh.vertices
     del mesh
     gc.collect()
     np.testing.assert_array_equal(v, verts)
+
+
+def test_one_sided_survives_the_remote_shape_spec():
+    from wmo.remote.scene import shape_from_spec, shape_to_spec
+    verts, tris = [[0, 0, 0], [1, 0, 0], [0, 0, 1]], [[0, 2, 1]]
+    spec = shape_to_spec(wmo.TriangleMesh(verts, tris, one_sided=True))
+    assert spec["one_sided"] is True and shape_from_spec(spec).one_sided
+    spec = shape_to_spec(wmo.TriangleMesh(verts, tris))
+    assert "one_sided" not in spec and not shape_from_spec(spec).one_sided
 
 
 def test_compound_children_share_the_shapes():

@@ -70,6 +70,90 @@ def test_random_scenes_never_produce_nan_or_escape(seed):
             f"a body left the container after {500 * (block + 1)} steps"
 
 
+def _rolling_ground(one_sided):
+    """A triangle-mesh ground: 8 x 8 cells of 2 m, heights 0.2 sin(x + z) m (convex and
+    concave edges, flat ones along the cells' diagonals)."""
+    xs = np.linspace(-8, 8, 9)
+    v = np.array([(x, 0.2 * np.sin(x + z), z) for x in xs for z in xs])
+    t = [tri for i in range(8) for j in range(8)
+         for tri in ((9 * i + j, 9 * i + j + 1, 9 * i + j + 9), (9 * i + j + 1, 9 * i + j + 10, 9 * i + j + 9))]
+    return wmo.TriangleMesh(v, t, one_sided=one_sided)
+
+
+def _random_shape(rng):
+    # Sizes 8 to 80 cm, log-uniform; hulls squashed or stretched along y (flat discs
+    # down to a few cm thick), and a box-and-ball compound.
+    def s():
+        return float(np.exp(rng.uniform(np.log(0.08), np.log(0.8))))
+    k = rng.integers(0, 6)
+    if k == 0:
+        return wmo.Sphere(s())
+    if k == 1:
+        return wmo.Box((s(), s(), s()))
+    if k == 2:
+        return wmo.Capsule(s(), s())
+    if k == 3:
+        return wmo.Cylinder(s(), s())
+    if k == 4:
+        p = rng.normal(size=(int(rng.integers(4, 24)), 3))
+        p /= np.linalg.norm(p, axis=1)[:, None]
+        return wmo.ConvexHull(p * s() * np.array([1, s() / 0.4, 1]))
+    return wmo.Compound([(wmo.Box((s(), s() / 3, s() / 3)), wmo.Pose()),
+                         (wmo.Sphere(s() / 2), wmo.Pose(position=(0.5, 0, 0)))])
+
+
+def test_a_one_sided_mesh_ground_pushes_a_sunken_box_back_up():
+    # A box three quarters through a flat triangle-mesh ground, at rest. Two-sided, its
+    # shortest way out is down: it is pushed through and falls. One-sided (the surface
+    # of a solid below it), it is pushed up and rests on top: centre at its half height
+    # within 1 cm (the contacts' speculative slop and sag are millimetres) and level.
+    v = [[-5, 0, -5], [5, 0, -5], [5, 0, 5], [-5, 0, 5]]
+    for one_sided in (False, True):
+        w = wmo.World(sleeping=False)
+        w.add_body(wmo.TriangleMesh(v, [[0, 2, 1], [0, 3, 2]], one_sided=one_sided), kind="static")
+        box = w.add_body(wmo.Box((0.5, 0.5, 0.5)), position=(0.3, -0.25, 0.2))
+        w.step(180)
+        if one_sided:
+            assert abs(box.position[1] - 0.5) < 0.01
+            assert _tilt_degrees(box.orientation) < 0.1
+        else:
+            assert box.position[1] < -5
+
+
+@pytest.mark.parametrize("seed", range(1, 11))
+def test_random_piles_on_a_one_sided_mesh_ground_with_ccd_never_escape(seed):
+    # 30 random bodies (spheres, boxes, capsules, cylinders, flat or long hulls, compounds;
+    # density 100-5000 kg/m^3) dropped from up to 15 m onto a rolling triangle-mesh ground
+    # in a box of static walls, three kicked at ~4 m/s every 300 steps, 3000 steps at the
+    # defaults. Measured over seeds 1-40 (this file's scene): with a two-sided ground 18
+    # scenes lose a body through it, nearly all flat hulls whose first corner impact spins
+    # them at ~100 rad/s (1.7 rad a step), so their far side passes the zero-thickness
+    # ground before any contact holds it and the two-sided rule then pushes them out below;
+    # one-sided, 4 (seeds 6, 9, 22, 33: the spin still carries the whole body past the
+    # plane in a step, and a body behind the surface that does not touch it is ignored);
+    # one-sided with ccd=True on every body (its sweeps cover the rotation), none of the
+    # 40. Two-sided with CCD still loses a body in 20 of the 40.
+    rng = np.random.default_rng(seed)
+    w = wmo.World(sleeping=False)
+    w.add_body(_rolling_ground(True), kind="static")
+    for x, z, hx, hz in ((8.5, 0, 0.5, 9), (-8.5, 0, 0.5, 9), (0, 8.5, 9, 0.5), (0, -8.5, 9, 0.5)):
+        w.add_body(wmo.Box((hx, 10, hz)), position=(x, 9, z), kind="static")
+    w.add_body(wmo.Box((9, 0.5, 9)), position=(0, 19.5, 0), kind="static")
+    dyn = [w.add_body(_random_shape(rng), position=(rng.uniform(-6, 6), rng.uniform(3, 15), rng.uniform(-6, 6)),
+                      density=float(np.exp(rng.uniform(np.log(100), np.log(5000)))),
+                      friction=float(rng.uniform(0, 1)), ccd=True).index for _ in range(30)]
+    for block in range(10):
+        for i in rng.choice(dyn, size=3, replace=False):
+            b = w.body(int(i))
+            w.apply_impulse(b, rng.normal(size=3) * 4 * b.mass, b.position)
+        w.step(300)
+        p = w.positions[dyn]
+        assert np.isfinite(p).all()
+        # Inside the walls and above the ground's lowest point (-0.2 m) less 0.4 m.
+        assert (np.abs(p[:, [0, 2]]) < 8.2).all() and (p[:, 1] > -0.6).all() and (p[:, 1] < 19.2).all(), \
+            f"a body left the container after {300 * (block + 1)} steps"
+
+
 def closed_frictionless_box(**world_kwargs):
     """No gravity, no friction, no restitution, no damping: 40 spheres and boxes fired
     around a closed container of static walls (wmo.scenes.closed_box)."""

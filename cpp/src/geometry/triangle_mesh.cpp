@@ -216,10 +216,11 @@ RayHit raycast_mesh(const TriangleMesh& mesh, const Vec3& origin, const Vec3& di
 // TriangleMesh
 // ---------------------------------------------------------------------------------
 
-TriangleMesh::TriangleMesh(std::vector<Vec3> vertices, std::vector<std::array<int, 3>> triangles)
+TriangleMesh::TriangleMesh(std::vector<Vec3> vertices, std::vector<std::array<int, 3>> triangles, bool one_sided)
     : Shape(ShapeType::kTriangleMesh),
       vertices_(std::move(vertices)),
-      triangles_(std::move(triangles)) {
+      triangles_(std::move(triangles)),
+      one_sided_(one_sided) {
   const int nv = static_cast<int>(vertices_.size());
   const int nt = static_cast<int>(triangles_.size());
   if (nv == 0) throw InvalidArgument("vertices must not be empty, got 0 vertices");

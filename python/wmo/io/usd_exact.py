@@ -28,8 +28,9 @@ Attributes (all custom, at the default time):
   kg m^2 about the centre of mass, shape frame);
 - a collider prim: its shape's spec (the form remote scenes use, PROTOCOL.md), one
   ``wmo:shape:<field>`` attribute per field (``type``, ``half_extents``, ``radius``,
-  ``points`` as double3[], ``triangles`` as int3[], ...), and for a part of a compound
-  its ``wmo:localPosition`` / ``wmo:localOrientation`` in the body's shape frame;
+  ``points`` as double3[], ``triangles`` as int3[], ``one_sided`` as bool, ...), and for
+  a part of a compound its ``wmo:localPosition`` / ``wmo:localOrientation`` in the
+  body's shape frame;
 - a ``PhysicsCollisionGroup``: ``wmo:index``, the WMO group number it stands for.
 """
 from __future__ import annotations
@@ -126,7 +127,9 @@ def write_collider(prim, shape: "wmo.Shape", local_pose: Optional["wmo.Pose"] = 
 
     T = Sdf.ValueTypeNames
     for name, value in shape_to_spec(shape).items():
-        if isinstance(value, (str, float)):
+        if isinstance(value, bool):  # (before float: a bool is an int, not a float)
+            type_name = T.Bool
+        elif isinstance(value, (str, float)):
             type_name = T.String if isinstance(value, str) else T.Double
         elif not isinstance(value[0], list):
             type_name, value = T.Double3, Gf.Vec3d(*value)
@@ -171,7 +174,7 @@ def _shape(prim) -> Optional["wmo.Shape"]:
         name = a.GetName()
         if name.startswith("wmo:shape:"):
             v = a.Get()
-            spec[name[len("wmo:shape:"):]] = v if isinstance(v, (str, float)) else np.asarray(v).tolist()
+            spec[name[len("wmo:shape:"):]] = v if isinstance(v, (str, float, bool)) else np.asarray(v).tolist()
     return shape_from_spec(spec, limits=False) if spec else None
 
 

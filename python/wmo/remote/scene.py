@@ -188,7 +188,7 @@ def shape_from_spec(spec: Any, *, limits: bool = True) -> _core.Shape:
     t = spec["type"]
     fields = {"sphere": ("radius",), "box": ("half_extents", "rounding"), "capsule": ("radius", "half_height"),
               "cylinder": ("radius", "half_height"), "convex_hull": ("points",), "plane": ("normal", "offset"),
-              "triangle_mesh": ("vertices", "triangles"), "compound": ("children",)}
+              "triangle_mesh": ("vertices", "triangles", "one_sided"), "compound": ("children",)}
     if t not in fields:
         raise EditError("bad_args", f"shape.type must be one of {', '.join(fields)}, got {t!r}")
     _check_keys(f"shape {t}", spec, ("type",) + fields[t])
@@ -214,7 +214,10 @@ def shape_from_spec(spec: Any, *, limits: bool = True) -> _core.Shape:
         tris = _points("shape.triangles", spec.get("triangles"), MAX_MESH_TRIANGLES if limits else None)
         if (tris != np.round(tris)).any() or tris.min() < 0 or tris.max() >= len(vertices):
             raise EditError("bad_args", f"shape.triangles must index the {len(vertices)} vertices")
-        return _core.TriangleMesh(vertices, tris.astype(np.int32))
+        one_sided = spec.get("one_sided", False)
+        if not isinstance(one_sided, bool):
+            raise EditError("bad_args", f"shape.one_sided must be true or false, got {one_sided!r}"[:200])
+        return _core.TriangleMesh(vertices, tris.astype(np.int32), one_sided=one_sided)
     except EditError:
         raise
     except (ValueError, TypeError) as e:  # the core's own checks (degenerate hull, ...)
@@ -269,8 +272,11 @@ def shape_to_spec(shape: _core.Shape) -> dict:
     if isinstance(shape, _core.Plane):
         return {"type": "plane", "normal": np.asarray(shape.normal).tolist(), "offset": shape.offset}
     if isinstance(shape, _core.TriangleMesh):
-        return {"type": "triangle_mesh", "vertices": np.asarray(shape.vertices).tolist(),
+        spec = {"type": "triangle_mesh", "vertices": np.asarray(shape.vertices).tolist(),
                 "triangles": np.asarray(shape.triangles).tolist()}
+        if shape.one_sided:
+            spec["one_sided"] = True
+        return spec
     if isinstance(shape, _core.Compound):
         return {"type": "compound", "children": [
             {"shape": shape_to_spec(child), "position": np.asarray(pose.position).tolist(),

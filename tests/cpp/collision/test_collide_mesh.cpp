@@ -37,7 +37,7 @@ namespace {
 using Tris = std::vector<std::array<int, 3>>;
 
 // Two grid triangles per quad of size `cell`, CCW seen from +z, in the plane z = o.z.
-TriangleMesh make_grid(int n, Real cell, const Vec3& o) {
+TriangleMesh make_grid(int n, Real cell, const Vec3& o, bool one_sided = false) {
   std::vector<Vec3> v;
   Tris t;
   for (int j = 0; j <= n; ++j)
@@ -48,7 +48,7 @@ TriangleMesh make_grid(int n, Real cell, const Vec3& o) {
       t.push_back({a, b, c});
       t.push_back({a, c, d});
     }
-  return TriangleMesh(v, t);
+  return TriangleMesh(v, t, one_sided);
 }
 
 // Cube [-1, 1]^3 as 12 outward CCW triangles.
@@ -428,6 +428,88 @@ TEST(CollideMesh, BackFaceContact) {
   for (const Manifold& m : ms) {
     EXPECT_EQ(m.normal, Vec3(0, 0, -1));
     EXPECT_NEAR(m.points[0].depth, 0.05, 1e-12);
+  }
+}
+
+TEST(CollideMesh, OneSidedPushesAnOverlappingBodyOutThroughTheFront) {
+  // The two-sided grid pushes a ball whose centre is below it down (previous test); the
+  // one-sided grid pushes the same ball up, by the depth of its lowest point (0.55 m),
+  // along the face normal, from every triangle it overlaps.
+  const TriangleMesh grid = make_grid(4, 0.5, Vec3(-1, -1, 0), true);
+  EXPECT_TRUE(grid.one_sided());
+  const Sphere ball(0.3);
+  const auto ms = collide(grid, ball, Pose(Vec3(0.1, 0.2, -0.25)));
+  ASSERT_FALSE(ms.empty());
+  for (const Manifold& m : ms) {
+    check_manifold(m, grid);
+    EXPECT_EQ(m.normal, Vec3(0, 0, 1));
+    for (int i = 0; i < m.count; ++i) EXPECT_NEAR(m.points[i].depth, 0.55, 1e-9);
+  }
+  // A level box three quarters through (its top 5 cm above the grid): up, every point
+  // 15 cm deep. Tilted, still up, and no deeper than its lowest corner.
+  const Box box(Vec3(0.3, 0.2, 0.1));
+  for (const Manifold& m : collide(grid, box, Pose(Vec3(0.05, -0.1, -0.05)))) {
+    check_manifold(m, grid);
+    EXPECT_EQ(m.normal, Vec3(0, 0, 1));
+    for (int i = 0; i < m.count; ++i) EXPECT_NEAR(m.points[i].depth, 0.15, 1e-12);
+  }
+  const Quat tilt(Eigen::AngleAxisd(0.3, Vec3(1, 1, 0).normalized()));
+  const Pose pose(Vec3(0.05, -0.1, -0.15), tilt);
+  const auto mb = collide(grid, box, pose);
+  ASSERT_FALSE(mb.empty());
+  Real lowest = kInf;
+  for (int k = 0; k < 8; ++k) {
+    const Vec3 c(k & 1 ? 0.3 : -0.3, k & 2 ? 0.2 : -0.2, k & 4 ? 0.1 : -0.1);
+    lowest = std::min(lowest, pose.transform_point(c).z());
+  }
+  Real deepest = 0;
+  for (const Manifold& m : mb) {
+    check_manifold(m, grid);
+    EXPECT_EQ(m.normal, Vec3(0, 0, 1));
+    for (int i = 0; i < m.count; ++i) deepest = std::max(deepest, m.points[i].depth);
+  }
+  EXPECT_GT(deepest, 0.2);
+  EXPECT_LE(deepest, -lowest + 1e-12);
+}
+
+TEST(CollideMesh, OneSidedIgnoresWhatIsBehindAndApart) {
+  // Behind the one-sided grid and apart from it (within the margin): no contact, where
+  // the two-sided grid reports a speculative one pointing down.
+  const Sphere ball(0.3);
+  const Pose below(Vec3(0.1, 0.2, -0.35));
+  EXPECT_FALSE(collide(make_grid(4, 0.5, Vec3(-1, -1, 0)), ball, below, true, 0.1).empty());
+  EXPECT_TRUE(collide(make_grid(4, 0.5, Vec3(-1, -1, 0), true), ball, below, true, 0.1).empty());
+  // In front: the same contacts as two-sided (up, speculative depth -0.05).
+  const Pose above(Vec3(0.1, 0.2, 0.35));
+  const auto two = collide(make_grid(4, 0.5, Vec3(-1, -1, 0)), ball, above, true, 0.1);
+  const auto one = collide(make_grid(4, 0.5, Vec3(-1, -1, 0), true), ball, above, true, 0.1);
+  ASSERT_EQ(one.size(), two.size());
+  ASSERT_FALSE(one.empty());
+  for (std::size_t k = 0; k < one.size(); ++k) {
+    EXPECT_EQ(one[k].normal, two[k].normal);
+    EXPECT_EQ(one[k].count, two[k].count);
+    EXPECT_EQ(one[k].points[0].depth, two[k].points[0].depth);
+  }
+}
+
+TEST(CollideMesh, OneSidedCubeFromInside) {
+  // A ball inside a one-sided (outward-wound) cube near its +X wall overlaps it: pushed
+  // out through the wall (+X) by the depth of its innermost point (0.4 m), not back
+  // inside as the two-sided cube would (-X, by 0.2 m).
+  std::vector<Vec3> v = make_cube().vertices();
+  std::vector<std::array<int, 3>> t = make_cube().triangles();
+  const TriangleMesh cube(v, t, true);
+  const Sphere ball(0.3);
+  const Pose p(Vec3(0.9, 0.1, -0.2));
+  const auto two = collide(make_cube(), ball, p);
+  ASSERT_FALSE(two.empty());
+  for (const Manifold& m : two) EXPECT_LT(m.normal.x(), -0.99);
+  const auto one = collide(cube, ball, p);
+  ASSERT_FALSE(one.empty());
+  for (const Manifold& m : one) {
+    check_manifold(m, cube);
+    EXPECT_EQ(m.normal, Vec3(1, 0, 0));
+    EXPECT_NEAR(m.points[0].depth, 0.4, 1e-9);
   }
 }
 

@@ -307,8 +307,28 @@ class TriangleMesh final : public Shape {
   /// and flat otherwise, with tol = kFlatEdgeRelTolerance * (diagonal of the mesh's
   /// bounding box). Boundary edges count as convex from both sides: they are real
   /// features.
-  TriangleMesh(std::vector<Vec3> vertices, std::vector<std::array<int, 3>> triangles);
+  ///
+  /// `one_sided`: false (the default) makes every triangle a two-sided sheet of zero
+  /// thickness: a body is pushed out on whichever side less of it has passed through.
+  /// true makes the mesh the surface of a solid that lies behind it (against the
+  /// normals: terrain, or a closed mesh wound outwards), in the manner of Jolt's
+  /// EBackFaceMode::IgnoreBackFaces, but keeping the overlaps:
+  ///   * a body in front of a triangle (or touching it from the front) collides as on a
+  ///     two-sided mesh, front side only;
+  ///   * a body that overlaps a triangle is always pushed out through its FRONT, along
+  ///     the face normal, however much of it has passed through (depth: how far its
+  ///     lowest point lies behind the triangle's plane within the triangle's prism);
+  ///   * a body behind a triangle that does not overlap it is ignored (a speculative
+  ///     contact from behind would push it through the sheet).
+  /// A zero-thickness ground that is two-sided lets a body whose centre is driven
+  /// past its plane (a fast, thin or spinning body, or a pile's pressure) be pushed
+  /// out below and fall; a one-sided ground pushes it back up. Queries (ray casts,
+  /// distances) see the triangles two-sided either way.
+  TriangleMesh(std::vector<Vec3> vertices, std::vector<std::array<int, 3>> triangles, bool one_sided = false);
   ~TriangleMesh() override;
+
+  /// True if the mesh is one-sided (the constructor's `one_sided`).
+  bool one_sided() const { return one_sided_; }
 
   const std::vector<Vec3>& vertices() const { return vertices_; }
   const std::vector<std::array<int, 3>>& triangles() const { return triangles_; }
@@ -346,6 +366,7 @@ class TriangleMesh final : public Shape {
   std::unique_ptr<TriangleMeshBvh> bvh_;
   Aabb aabb_;
   Real flat_tolerance_ = 0;
+  bool one_sided_ = false;
 };
 
 /// A rigid set of convex children, each with a pose in the compound's frame.
