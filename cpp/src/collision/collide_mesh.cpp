@@ -12,7 +12,10 @@
 //   4. Manifold: B's supporting face along -N is clipped against T's side planes (T as
 //      the reference face), or T against B's face (B as reference), Sutherland-Hodgman
 //      (Ericson 8.3.4 / Gregorius, "Robust Contact Creation for Physics Simulations",
-//      GDC 2015); points deeper than -margin are kept and reduced to 4 (manifold_reduce.h).
+//      GDC 2015); with T as the reference, B's support points along -N tilted 45 degrees
+//      four ways are added where they lie over T within the margin (speculative rim
+//      points, add_rim_points); points deeper than -margin are kept and reduced to 4
+//      (manifold_reduce.h).
 //      When neither face produced N (an edge-edge or vertex contact), the single
 //      GJK / EPA point pair is the manifold.
 //
@@ -46,9 +49,12 @@
 //     over the neighbour, not over T) gives no contact: the neighbour reports it.
 // One-sided meshes (TriangleMesh::one_sided: the surface of a solid behind it). Before the
 // rule above, a contact whose normal does not point out through T's front (N.n <= sin
-// 1e-6) is dropped if B does not overlap T (speculative, from behind or beside) and
+// 1e-6) is dropped if B does not overlap T and lies wholly behind T's plane, and
 // otherwise turned into T's face normal: B is pushed out through the front, the depths
-// along n from the clipping. The rule then runs for the front side only, and where it
+// along n from the clipping (a body apart from T but reaching in front of its plane, such
+// as one sliding into a valley towards the rising face ahead, gets that face's
+// speculative points; dropped, a 2 cm disc sliding at 6.5 m/s met the face only once
+// it was wholly behind it, and fell). The rule then runs for the front side only, and where it
 // turns N into the face normal the side is always the front. A two-sided ground lets a
 // body whose centre was driven through it (a 2 g sliver spinning at 415 rad/s landing
 // at 16 m/s; a pile pressing a hull down) be pushed out below and fall away: a random-
@@ -299,6 +305,46 @@ bool allowed_on_side(const MeshContext& ctx, int t, const std::array<Vec3, 3>& v
   return N.dot(edge_outward(v, n, internal)) <= sin_tol;
 }
 
+// Speculative rim points. The manifold on T's face is B's supporting face along -N
+// clipped to T: for a rounded hull (a disc of many small facets) that face is one small
+// facet, and the rest of B's underside, however close to T, has no point. A flat hull
+// landing on a corner is then spun up by the corner's impulse (measured: ~100 rad/s for
+// a 15 cm disc at 10 m/s, 1.7 rad a step at 60 Hz) with nothing to stop its far side,
+// which passes T's plane within the step; on a zero-thickness mesh the disc is lost.
+// So B's support points along -N tilted by 45 degrees towards +-t1 and +-t2 (t1, t2
+// spanning T's plane) are added where they lie over T within the margin: on a disc, its
+// rim on four sides; on a box or hull lying flat, corners of the face already there
+// (skipped as duplicates). They are speculative (negative depth) until the body turns
+// onto them, and bound that turn as any speculative point bounds an approach. Only for
+// a polygonal supporting face (hulls, boxes, cylinder caps): a sphere or capsule
+// touches at one point or segment, which its supporting feature already gives.
+// Feature ids: mode 3, the tilt direction's index.
+constexpr int kRimPoints = 4;
+
+void add_rim_points(const MeshContext& ctx, const std::array<Vec3, 3>& v, const Vec3& n, const Vec3& N, Real nN,
+                    Real margin, ContactPoint* pts, int& np) {
+  Vec3 t1, t2;
+  orthonormal_basis(N, t1, t2);
+  const std::array<Vec3, kRimPoints> dirs{-N + t1, -N - t1, -N + t2, -N - t2};
+  // Inside-T test: the point's offset from each edge against the edge's in-plane
+  // outward normal, with the clipping's slack.
+  std::array<Vec3, 3> out_normals;
+  for (int e = 0; e < 3; ++e) out_normals[e] = edge_outward(v, n, e);
+  for (int k = 0; k < kRimPoints; ++k) {
+    const Vec3 p = ctx.b_in_a.transform_point(ctx.b.support(ctx.rot.transpose() * dirs[k]));
+    const Real depth = n.dot(v[0] - p) / nN;
+    if (!(depth >= -margin)) continue;
+    const Vec3 q = p + depth * N;  // on T's plane
+    bool inside = true;
+    for (int e = 0; e < 3; ++e) inside = inside && out_normals[e].dot(q - v[e]) <= kClipSlack;
+    if (!inside) continue;
+    bool duplicate = false;
+    for (int j = 0; j < np && !duplicate; ++j) duplicate = (pts[j].point_b - p).squaredNorm() <= 1e-18;
+    if (duplicate) continue;
+    pts[np++] = ContactPoint{q, p, depth, (3u << 12) | static_cast<std::uint32_t>(k)};
+  }
+}
+
 // Contact of triangle t with B; appends a manifold to `out` if it touches within the
 // margin.
 void collide_triangle(const MeshContext& ctx, int t, std::vector<Manifold>& out) {
@@ -324,10 +370,15 @@ void collide_triangle(const MeshContext& ctx, int t, std::vector<Manifold>& out)
     modified = true;
   } else if (one_sided && !(N.dot(n) > std::sin(kFeatureAngle))) {
     // One-sided (file comment): a contact whose way out is not through T's front.
-    // Apart from T (within the margin, behind it or beside it): no contact, B is behind
-    // the solid's surface or the neighbours' business. Overlapping T: out through the
-    // front, along the face normal (the clipping below gives the depths).
-    if (r.distance > 0) return;
+    // Apart from T with all of B behind T's plane: B is behind the solid's surface, no
+    // contact. Otherwise (overlapping T, or apart from it and reaching in front of its
+    // plane, as a body sliding into a valley is beside the rising face ahead of it):
+    // out through the front, along the face normal; the clipping below keeps what lies
+    // over T within the margin and gives the depths.
+    if (r.distance > 0) {
+      const Vec3 top = ctx.b_in_a.transform_point(ctx.b.support(ctx.rot.transpose() * n));
+      if (n.dot(top - v[0]) < 0) return;
+    }
     N = n;
     modified = true;
   }
@@ -381,7 +432,7 @@ void collide_triangle(const MeshContext& ctx, int t, std::vector<Manifold>& out)
   for (int k = 0; k < nb; ++k) fb[k] = ctx.rot * face.vertices[k] + ctx.b_in_a.position;
   const std::uint32_t fid = face.feature << 14;
 
-  std::array<ContactPoint, kMaxClip> pts;
+  std::array<ContactPoint, kMaxClip + kRimPoints> pts;
   int np = 0;
   Manifold m;
   m.normal = N;
@@ -411,6 +462,7 @@ void collide_triangle(const MeshContext& ctx, int t, std::vector<Manifold>& out)
       if (!(depth >= -margin)) continue;
       pts[np++] = ContactPoint{p + depth * N, p, depth, fid | poly.v[k].id()};
     }
+    if (margin > 0 && nb >= 3) add_rim_points(ctx, v, n, N, nN, margin, pts.data(), np);
   } else if (nb >= 3 && b_cos >= kReferenceCos) {
     // B's face is the reference: clip T against its side planes, depth along N to it.
     make_polygon(v.data(), 3, poly);

@@ -513,6 +513,45 @@ TEST(CollideMesh, OneSidedCubeFromInside) {
   }
 }
 
+TEST(CollideMesh, TiltedRoundedDiscGetsSpeculativePointsAtItsFarRim) {
+  // A disc of radius 0.3 m and thickness 0.06 m made of rings of points (a rounded rim:
+  // its facets are small), tilted 0.15 rad and touching a flat grid with its low rim. The
+  // supporting face along -z is one small facet at the low rim; the speculative points
+  // added on four tilted directions reach the rest of its underside: with a 0.2 m margin
+  // the manifold spans more than the disc's radius, and its deepest point is the lowest
+  // one, 1 mm above the grid. (Without them, a disc landing on its rim spins up and its far side
+  // passes a thin ground within a step: see collide_mesh.cpp.)
+  std::vector<Vec3> pts;
+  const Real rings[5][2] = {{-0.03, 0.1}, {-0.02, 0.25}, {0, 0.3}, {0.02, 0.25}, {0.03, 0.1}};
+  for (const auto& r : rings)
+    for (int k = 0; k < 16; ++k) {
+      const Real a = 2 * kPi * (k + 0.5 * (&r - rings)) / 16;
+      pts.emplace_back(r[1] * std::cos(a), r[1] * std::sin(a), r[0]);
+    }
+  const ConvexHull disc(pts);
+  const Quat tilt(Eigen::AngleAxisd(0.15, Vec3(0, 1, 0)));
+  Real lowest = kInf;
+  for (const Vec3& p : pts) lowest = std::min(lowest, (tilt * p).z());
+  const Pose pose(Vec3(0.8, -0.8, -lowest + 1e-3), tilt);  // 1 mm above the grid
+  for (const bool one_sided : {false, true}) {
+    // Two triangles split along x = y: the disc lies over one of them.
+    const TriangleMesh grid = make_grid(1, 4.0, Vec3(-2, -2, 0), one_sided);
+    const auto ms = collide(grid, disc, pose, true, 0.2);
+    ASSERT_FALSE(ms.empty());
+    Real span = 0, deepest = -kInf;
+    for (const Manifold& m : ms) {
+      check_manifold(m, grid);
+      EXPECT_EQ(m.normal, Vec3(0, 0, 1));
+      for (int i = 0; i < m.count; ++i) {
+        deepest = std::max(deepest, m.points[i].depth);
+        for (int j = 0; j < m.count; ++j) span = std::max(span, (m.points[i].point_b - m.points[j].point_b).norm());
+      }
+    }
+    EXPECT_GT(span, 0.3);
+    EXPECT_NEAR(deepest, -1e-3, 1e-9);
+  }
+}
+
 TEST(CollideMesh, FeatureIdsStableUnderSmallMotion) {
   const TriangleMesh grid = make_grid(6, 0.5, Vec3(-1.5, -1.5, 0));
   const Box box(Vec3(0.4, 0.3, 0.2));
