@@ -143,6 +143,16 @@ def test_units_and_axis_options(tmp_path):
         wmo.io.load(p, scale=-1.0)
 
 
+def test_one_sided_static_mesh(tmp_path):
+    p = _write(tmp_path, TETRA)
+    assert not wmo.io.load(p).specs["m"]["shape"].one_sided
+    assert wmo.io.load(p, one_sided=True).specs["m"]["shape"].one_sided
+    with pytest.raises(ValueError, match="one_sided applies to"):
+        wmo.io.load(p, as_="convex_hull", one_sided=True)
+    with pytest.raises(TypeError, match="one_sided"):
+        wmo.io.load(p, one_sided="yes")
+
+
 def test_negative_indices_polygons_and_skipped_statements(tmp_path):
     text = ("mtllib missing.mtl\no quad\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\n"
             "usemtl red\ns off\nf -4/1/1 -3/1/1 -2/1/1 -1/1/1\n")

@@ -323,7 +323,7 @@ def load_obj(path: Union[str, "os.PathLike[str]"], as_: str = "static_mesh", *, 
              orientation: Sequence[float] = (0.0, 0.0, 0.0, 1.0), kind: Optional[str] = None,
              mass: Optional[float] = None, density: float = 1000.0, friction: float = 0.5,
              restitution: float = 0.0, world: Optional["wmo.World"] = None,
-             coacd_options: Optional[Dict[str, Any]] = None,
+             coacd_options: Optional[Dict[str, Any]] = None, one_sided: bool = False,
              **world_options: Any) -> LoadResult:
     """Reads the OBJ file at ``path`` into one body of a World (see the module docstring).
 
@@ -335,7 +335,9 @@ def load_obj(path: Union[str, "os.PathLike[str]"], as_: str = "static_mesh", *, 
     (kg) overrides ``density`` (kg/m^3). ``friction`` and ``restitution`` go to
     ``World.add_body``. ``world``: add to this World instead of a new one (a new World
     gets ``world_options``, e.g. ``dt``). ``coacd_options``: overrides of
-    :data:`DEFAULT_COACD_OPTIONS`.
+    :data:`DEFAULT_COACD_OPTIONS`. ``one_sided``: for ``static_mesh``, make the
+    ``wmo.TriangleMesh`` one-sided (the surface of a solid behind its faces: terrain,
+    or a closed mesh wound outwards; see ``wmo.TriangleMesh``).
 
     Returns a LoadResult whose ``bodies`` has one entry keyed by the file's stem;
     ``info`` holds the vertex and triangle counts read and, for a decomposition, how the
@@ -348,6 +350,10 @@ def load_obj(path: Union[str, "os.PathLike[str]"], as_: str = "static_mesh", *, 
     rot = _axis_rotation(up, world_up)
     if kind is None:
         kind = "static" if as_ == "static_mesh" else "dynamic"
+    if not isinstance(one_sided, bool):
+        raise TypeError(f"one_sided must be True or False, got {one_sided!r}")
+    if one_sided and as_ != "static_mesh":
+        raise ValueError(f"one_sided applies to as_='static_mesh' only, got as_={as_!r}")
     if as_ == "static_mesh" and kind != "static":
         raise ValueError(f"a static_mesh body must be static (WMO triangle meshes are static), got kind={kind!r}")
 
@@ -363,7 +369,7 @@ def load_obj(path: Union[str, "os.PathLike[str]"], as_: str = "static_mesh", *, 
     shape: wmo.Shape
     if as_ == "static_mesh":
         tris = drop_degenerate(verts, mesh.triangles, name, warnings)
-        shape = wmo.TriangleMesh(verts, tris)
+        shape = wmo.TriangleMesh(verts, tris, one_sided=one_sided)
     elif as_ == "convex_hull":
         used = np.unique(mesh.triangles)
         shape = make_hull(verts[used], name, warnings)
