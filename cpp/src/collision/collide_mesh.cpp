@@ -365,6 +365,10 @@ void collide_triangle(const MeshContext& ctx, int t, std::vector<Manifold>& out)
   bool modified = false;
   const Real nn = N.norm();
   const bool one_sided = mesh.one_sided();
+  auto reach = [&](const Vec3& d) {  // max over B of d.x, mesh frame (radius included)
+    return d.dot(ctx.b_in_a.transform_point(ctx.b.support_core(ctx.rot.transpose() * d))) + ctx.b.radius();
+  };
+  const Real offset = n.dot(v[0]);  // T's plane: {x : n.x = offset}
   if (!(nn > 0.5) || !N.allFinite()) {  // unit or zero by contract; zero: degenerate
     N = (one_sided ? 1 : centre_side) * n;
     modified = true;
@@ -375,10 +379,7 @@ void collide_triangle(const MeshContext& ctx, int t, std::vector<Manifold>& out)
     // plane, as a body sliding into a valley is beside the rising face ahead of it):
     // out through the front, along the face normal; the clipping below keeps what lies
     // over T within the margin and gives the depths.
-    if (r.distance > 0) {
-      const Vec3 top = ctx.b_in_a.transform_point(ctx.b.support(ctx.rot.transpose() * n));
-      if (n.dot(top - v[0]) < 0) return;
-    }
+    if (r.distance > 0 && reach(n) < offset) return;
     N = n;
     modified = true;
   }
@@ -412,10 +413,6 @@ void collide_triangle(const MeshContext& ctx, int t, std::vector<Manifold>& out)
       // it against that of its highest point above it (support points, radius
       // included); B's centre decides a tie. Every triangle of a flat patch then
       // agrees.
-      const Real offset = n.dot(v[0]);
-      auto reach = [&](const Vec3& d) {  // max over B of d.x, mesh frame
-        return d.dot(ctx.b_in_a.transform_point(ctx.b.support_core(ctx.rot.transpose() * d))) + ctx.b.radius();
-      };
       const Real below = offset + reach(-n);  // how far B reaches below T's plane
       const Real above = reach(n) - offset;   // ... and above it
       const Real tie = 1e-9 * (std::abs(below) + std::abs(above));
