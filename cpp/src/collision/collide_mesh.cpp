@@ -413,10 +413,13 @@ void collide_triangle(const MeshContext& ctx, int t, std::vector<Manifold>& out)
       // it against that of its highest point above it (support points, radius
       // included); B's centre decides a tie. Every triangle of a flat patch then
       // agrees.
-      const Real below = offset + reach(-n);  // how far B reaches below T's plane
-      const Real above = reach(n) - offset;   // ... and above it
-      const Real tie = 1e-9 * (std::abs(below) + std::abs(above));
-      const int side = one_sided ? 1 : below < above - tie ? 1 : (above < below - tie ? -1 : centre_side);
+      int side = 1;  // a one-sided mesh's is always the front
+      if (!one_sided) {
+        const Real below = offset + reach(-n);  // how far B reaches below T's plane
+        const Real above = reach(n) - offset;   // ... and above it
+        const Real tie = 1e-9 * (std::abs(below) + std::abs(above));
+        side = below < above - tie ? 1 : (above < below - tie ? -1 : centre_side);
+      }
       N = side * n;
     }
   }

@@ -318,8 +318,8 @@ class TriangleMesh final : public Shape {
   ///   * a body that overlaps a triangle is always pushed out through its FRONT, along
   ///     the face normal, however much of it has passed through (depth: how far its
   ///     lowest point lies behind the triangle's plane within the triangle's prism);
-  ///   * a body behind a triangle that does not overlap it is ignored (a speculative
-  ///     contact from behind would push it through the sheet).
+  ///   * a body wholly behind a triangle's plane that does not overlap it is ignored
+  ///     (a speculative contact from behind would push it through the sheet).
   /// A zero-thickness ground that is two-sided lets a body whose centre is driven
   /// past its plane (a fast, thin or spinning body, or a pile's pressure) be pushed
   /// out below and fall; a one-sided ground pushes it back up. Queries (ray casts,
