@@ -174,15 +174,15 @@ def test_energy_never_exceeds_what_the_system_started_with():
     assert w.kinetic_energy() < 0.05 * e0
 
 
-@pytest.mark.xfail(strict=True, reason="issue 3, open: at the defaults 106 of 600 steps gain kinetic "
-                   "energy, the largest by 2.9e-8 relative (step 457): the boxes turn at constant angular "
+@pytest.mark.xfail(strict=True, reason="issue 3, open: at the defaults 19 of 600 steps gain kinetic "
+                   "energy, the largest by 3.0e-8 relative (step 255): the boxes turn at constant angular "
                    "velocity (gyroscopic term off), whose energy changes as they turn, and the rows' anchors "
                    "turn between the biased and the relax passes; energy_guard_passes=8 (off by default, "
                    "next test) leaves the same. The warm-started impact that gained 8.0e-4 here (a column "
                    "of three spheres in a corner: the contact that stopped an impact carried its impulse "
                    "into the next step, and the relax passes did not take it all back) no longer occurs in "
                    "this scene since the broadphase boxes are swept by the static motion margin (the walls' "
-                   "contacts come a step earlier); seed 7 still has one (2.7e-4, next test)")
+                   "contacts come a step earlier); seed 3 has one (7.5e-4, next test)")
 def test_energy_never_increases_from_one_step_to_the_next():
     # The issue's demand, step by step: 1e-12 relative allows round-off of the sum.
     w = closed_frictionless_box()
@@ -196,15 +196,17 @@ def test_energy_never_increases_from_one_step_to_the_next():
 
 @pytest.mark.parametrize("gyroscopic", [False, True])
 def test_the_energy_guard_takes_back_a_warm_started_impact(gyroscopic):
-    # The closed box (seed 7, which has a warm-started impact) with the energy guard
-    # (energy_guard_passes=8): relax passes are added to a substep until the bodies in
-    # contact have no more energy than before its contact solve (to
-    # energy_guard_tolerance, 1e-6 relative a substep), so no step may gain 4e-6 (four
-    # substeps of it). Measured: at most 9.9e-8 (3.0e-7 with the gyroscopic term, see
-    # the xfail above). Without the guard the same scene gains 2.7e-4 in one step (step
-    # 307, gyroscopic term off): the test sees the guard.
+    # The closed box (seed 3, which has a warm-started impact: two spheres pressed into
+    # a corner of the ceiling) with the energy guard (energy_guard_passes=8): relax
+    # passes are added to a substep until the bodies in contact have no more energy than
+    # before its contact solve (to energy_guard_tolerance, 1e-6 relative a substep), so
+    # no step may gain 4e-6 (four substeps of it). Measured: at most 3.0e-8 (9.1e-8 with
+    # the gyroscopic term). Without the guard the same scene gains 7.5e-4 in one step
+    # (step 566, gyroscopic term off): the test sees the guard. (Seed 7 had the impact
+    # until the rows followed the inertia of fast-turning boxes, integrate_positions,
+    # which changed the scenes' courses.)
     def largest_gain(**kw):
-        w = closed_frictionless_box(seed=7, **kw)
+        w = closed_frictionless_box(seed=3, **kw)
         e, worst, added = w.kinetic_energy(), 0.0, 0
         for _ in range(600):
             w.step()
@@ -269,6 +271,85 @@ def test_a_ball_spinning_in_place_neither_sinks_nor_moves(spin):
         assert abs(b.position[1] - 0.5) < 2e-4
         assert np.linalg.norm(b.linear_velocity) < 1e-6
     assert b.angular_velocity[0] == pytest.approx(spin, rel=1e-9)
+
+
+def _rod():
+    # A rod with a ball at one end (1 m x 8 cm x 8 cm and r 8 cm): 4.3 kg at density
+    # 500, principal inertias 0.0062 / 0.47 / 0.47 kg m^2 about its centre of mass (77:1).
+    return wmo.Compound([(wmo.Box((0.5, 0.04, 0.04)), wmo.Pose()),
+                         (wmo.Sphere(0.08), wmo.Pose(position=(0.5, 0, 0)))])
+
+
+def _mechanical_energy(b, g=9.81):
+    # Kinetic (translation and rotation about the centre of mass) plus potential (y up).
+    r = _rotation(b.orientation)
+    om, v = np.asarray(b.angular_velocity), np.asarray(b.linear_velocity)
+    com = np.asarray(b.position) + r @ np.asarray(b.center_of_mass)
+    return 0.5 * b.mass * v @ v + 0.5 * om @ (r @ np.asarray(b.inertia) @ r.T) @ om + b.mass * g * com[1]
+
+
+@pytest.mark.parametrize("substeps, iterations, block_solver",
+                         [(4, 4, False), (1, 10, False), (4, 4, True), (1, 10, True)])
+def test_a_fast_spinning_rod_dropped_on_the_ground_gains_no_energy(substeps, iterations, block_solver):
+    # The rod dropped from 1 m spinning at 170 rad/s about a random axis (2.8 rad a step
+    # at 60 Hz), gyroscopic term on so that its flight keeps its energy, 12 seeds, 4 s
+    # each: contacts may take energy out, never put it in. Bound: the energy at the start
+    # plus the lift of pushing out the deepest penetration so far (m g depth: the soft
+    # contacts' position correction raises the body by at most that) plus 1e-5 of it
+    # (the gyroscopic integrator's error in flight, measured up to 3.5e-7 at one
+    # substep). The contact rows used to apply impulses through the world inverse
+    # inertia of the step's start while the rod turned radians within the step, which
+    # is energy-consistent in that stale metric, not in the rod's: measured, 5 of 12
+    # drops gained energy at these settings (up to 5.5 times), all 12 at one substep
+    # of 10 iterations (one to 67,779 times, 376,000 rad/s). The rows now use the
+    # inertia the body has after each substep (World::integrate_positions).
+    for seed in range(12):
+        rng = np.random.default_rng(seed)
+        w = wmo.World(gravity=(0, -9.81, 0), substeps=substeps, iterations=iterations,
+                      block_solver=block_solver, gyroscopic=True, sleeping=False)
+        w.add_body(wmo.Box((10, 0.5, 10)), position=(0, -0.5, 0), kind="static")
+        q = rng.normal(size=4)
+        om = rng.normal(size=3)
+        b = w.add_body(_rod(), position=(0, 1, 0), orientation=q / np.linalg.norm(q), density=500,
+                       angular_velocity=om * 170 / np.linalg.norm(om))
+        e0 = _mechanical_energy(b)
+        depth = 0.0
+        touched = False
+        for k in range(240):
+            w.step()
+            touched = touched or w.contact_count > 0
+            depth = max(depth, w.max_penetration)
+            e = _mechanical_energy(b)
+            assert e <= e0 * (1 + 1e-5) + b.mass * 9.81 * depth, \
+                f"seed {seed}: energy {e:.1f} J at step {k + 1}, started with {e0:.1f} J"
+        assert touched
+
+
+@pytest.mark.parametrize("block_solver", [False, True])
+def test_a_rod_spinning_flat_on_the_ground_gains_no_energy(block_solver):
+    # The rod lying on the ground spinning at 50-200 rad/s about the vertical (and a few
+    # rad/s about the horizontal axes), friction 0.3-1.5, 10 seeds, 5 s each: friction
+    # and contacts only take energy out. Bound from one step to the next: the lift of
+    # pushing out the last step's penetration (m g depth) plus 1e-6 of the start's
+    # energy (round-off; measured 1.4e-15). Besides the refreshed inertia (test above)
+    # this needs the friction rows' effective masses at the turned anchors (row_mass):
+    # with the step's masses 1 of 10 seeds rose by 4.3% of its energy in one step; with
+    # neither, 7 of 10 (one doubled its energy).
+    for seed in range(10):
+        rng = np.random.default_rng(seed)
+        w = wmo.World(gravity=(0, -9.81, 0), block_solver=block_solver, sleeping=False)
+        w.add_body(wmo.Box((10, 0.5, 10)), position=(0, -0.5, 0), kind="static")
+        b = w.add_body(_rod(), position=(0, 0.09, 0), density=500, friction=float(rng.uniform(0.3, 1.5)),
+                       angular_velocity=(rng.normal() * 5, rng.uniform(50, 200), rng.normal() * 5),
+                       linear_velocity=(rng.normal(), 0, rng.normal()))
+        e0 = e = _mechanical_energy(b)
+        depth = 0.0
+        for k in range(300):
+            w.step()
+            e_next = _mechanical_energy(b)
+            assert e_next <= e + 1e-6 * e0 + b.mass * 9.81 * depth, \
+                f"seed {seed}: energy rose from {e:.2f} J to {e_next:.2f} J at step {k + 1}"
+            e, depth = e_next, w.max_penetration
 
 
 def _tilt_degrees(q):

@@ -378,12 +378,18 @@ void solve_contacts(std::vector<ContactConstraint>& cs, std::vector<BodyState>& 
       apply(a, b, ra, rb, impulse * n);
     }
     if (c.friction == 0) continue;
+    const Real turn = turn_sin2(a, b);
+    const bool turned = turn > kRowMassTurnSin2;
     for (int ii = 0; ii < c.count; ++ii) {
       const int i = reverse ? c.count - 1 - ii : ii;  // backward in a backward pass
       ContactConstraintPoint& p = c.points[i];
       const Vec3& ra = anchor_a[i];
       const Vec3& rb = anchor_b[i];
       const Vec3 dv = relative_velocity(a, b, ra, rb);
+      if (turned) {  // the tangent masses follow the turned anchors and inertia (row_mass)
+        p.tangent_mass[0] = row_mass(p.tangent_mass[0], effective_mass(a, b, ra, rb, c.tangent1), turn);
+        p.tangent_mass[1] = row_mass(p.tangent_mass[1], effective_mass(a, b, ra, rb, c.tangent2), turn);
+      }
       Real t0 = p.tangent_impulse[0] - p.tangent_mass[0] * c.tangent1.dot(dv);
       Real t1 = p.tangent_impulse[1] - p.tangent_mass[1] * c.tangent2.dot(dv);
       // Coulomb cone: scale the tangential impulse back onto the circle of radius mu * lambda_n.

@@ -216,7 +216,7 @@ WMO_CLONES void turn_groups(Group* groups, int count, const MotionRow* rows, boo
     Group& g = groups[k];
     const Motion a = gather_motion(g.row_a, rows), b = gather_motion(g.row_b, rows);
     const Masses m = ld_masses(g);
-    const V3 n = ld3(g.n);
+    const V3 n = ld3(g.n), t1 = ld3(g.t1), t2 = ld3(g.t2);
     const V3 dp = b.dp - a.dp;
     // Lanes whose bodies turned by more than kRowMassTurn since the step began (the
     // others keep the step's effective mass, row_mass()); none: the turned masses are
@@ -243,6 +243,17 @@ WMO_CLONES void turn_groups(Group* groups, int count, const MotionRow* rows, boo
         normal_mass = keep ? normal_mass : current;
       }
       st(p.mass_now, normal_mass);
+      if (turned && g.friction) {
+        // The tangent rows' masses by the same rule, kept in place: the passes read
+        // them from tangent_mass (padding points keep their 0).
+        for (int r = 0; r < 2; ++r) {
+          const v8 stale = ld(p.tangent_mass[r]);
+          const v8 current = effective_mass(m, ra, rb, r == 0 ? t1 : t2);
+          const v8 diff = stale - current;
+          const m8 keep = (vmax(diff, -diff) <= splat(0.1f) * current) | (stale == zero) | ~lane_turned;
+          st(p.tangent_mass[r], keep ? stale : current);
+        }
+      }
       for (int r = 0; r < 3; ++r) {
         st(p.ra_now[r], r == 0 ? ra.x : r == 1 ? ra.y : ra.z);
         st(p.rb_now[r], r == 0 ? rb.x : r == 1 ? rb.y : rb.z);
@@ -476,6 +487,17 @@ WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, SoftLanes dyn,
   }
 }
 
+/// A symmetric inverse inertia into lane `lane` of a Group's ia or ib (xx, yy, zz, xy,
+/// xz, yz).
+void pack_inertia(const Mat3& m, float (*out)[L], int lane) {
+  out[0][lane] = static_cast<float>(m(0, 0));
+  out[1][lane] = static_cast<float>(m(1, 1));
+  out[2][lane] = static_cast<float>(m(2, 2));
+  out[3][lane] = static_cast<float>(m(0, 1));
+  out[4][lane] = static_cast<float>(m(0, 2));
+  out[5][lane] = static_cast<float>(m(1, 2));
+}
+
 }  // namespace
 
 void dependency_level_order(const std::vector<ContactConstraint>& cs, const std::vector<BodyState>& states,
@@ -525,14 +547,6 @@ void WideContacts::build(const std::vector<ContactConstraint>& cs, const std::ve
       row_moves_.push_back(moves(states[body]) ? 1 : 0);
     }
     return r;
-  };
-  auto pack_inertia = [](const Mat3& m, float (*out)[L], int lane) {
-    out[0][lane] = static_cast<float>(m(0, 0));
-    out[1][lane] = static_cast<float>(m(1, 1));
-    out[2][lane] = static_cast<float>(m(2, 2));
-    out[3][lane] = static_cast<float>(m(0, 1));
-    out[4][lane] = static_cast<float>(m(0, 2));
-    out[5][lane] = static_cast<float>(m(1, 2));
   };
   const int count = static_cast<int>(order.size());
   for (int q = 0; q < count;) {
@@ -618,6 +632,18 @@ void WideContacts::build(const std::vector<ContactConstraint>& cs, const std::ve
   load(states);
   prepare_groups(groups_.data(), group_count(), rows_.data());
   set_motion(states);
+}
+
+void WideContacts::refresh_inertia(const std::vector<BodyState>& states, const std::vector<int>& bodies) {
+  if (bodies.empty()) return;
+  refresh_.assign(row_state_.size(), 0);
+  for (const int body : bodies)
+    if (body >= 0 && body < static_cast<int>(row_of_.size()) && row_of_[body] > 0) refresh_[row_of_[body]] = 1;
+  for (Group& g : groups_)
+    for (int l = 0; l < L; ++l) {
+      if (refresh_[g.row_a[l]]) pack_inertia(states[g.body_a[l]].inv_inertia, g.ia, l);
+      if (refresh_[g.row_b[l]]) pack_inertia(states[g.body_b[l]].inv_inertia, g.ib, l);
+    }
 }
 
 void WideContacts::set_motion(const std::vector<BodyState>& states) {

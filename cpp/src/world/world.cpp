@@ -702,8 +702,21 @@ void World::integrate_plain_run(int begin, int end, Real h, int substeps) {
   }
 }
 
+bool World::inertia_follows_turn(int i) const {
+  const BodyState& s = states_[i];
+  return !(body_flags_[i] & kIsotropic) && s.inv_mass > 0 && s.dq.vec().squaredNorm() > kRowMassTurnSin2;
+}
+
 void World::integrate_positions(Real h) {
-  for (const int i : coupled_) integrate_position(i, states_[i], body_flags_[i], h, states_[i].v);
+  inertia_turned_.clear();
+  for (const int i : coupled_) {
+    BodyState& s = states_[i];
+    integrate_position(i, s, body_flags_[i], h, s.v);
+    if (inertia_follows_turn(i)) {
+      s.inv_inertia = world_inv_inertia(orientations_[i], masses_[i].inv_inertia_local);
+      inertia_turned_.push_back(i);
+    }
+  }
 }
 
 void World::integrate_velocity(int i, BodyState& s, std::uint8_t f, Real h) const {
@@ -1475,10 +1488,21 @@ void World::run_step() {
         for (int it = 0; it < settings_.iterations; ++it) pass(true, false);
       }
       integrate_positions(h);
+      if (guard && !inertia_turned_.empty()) {
+        // The guard's metric follows the inertia the rows now use (integrate_positions).
+        for (GuardBody& gb : guard_bodies_) {
+          if (gb.mass == 0 || !inertia_follows_turn(gb.row)) continue;
+          const Mat3 r = orientations_[gb.row].toRotationMatrix();
+          gb.inertia = r * masses_[gb.row].inertia_local * r.transpose();
+        }
+      }
       if (contacts) {
         // The relax passes and the next substep see the new motion (the scalar passes
         // turn the anchors row by row).
-        if (!scalar) wide_.set_motion(states_);
+        if (!scalar) {
+          wide_.refresh_inertia(states_, inertia_turned_);
+          wide_.set_motion(states_);
+        }
         for (int it = 0; it < settings_.relax_iterations; ++it) pass(false, it % 2 == 1);  // alternating: WorldSettings::relax_iterations
         if (guard) {
           // Until the energy is back (to the tolerance), the cap, or a pass that takes

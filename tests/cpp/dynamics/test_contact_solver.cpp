@@ -194,6 +194,49 @@ TEST(WideContacts, AReorderingThatBreaksTheSequenceChangesTheResult) {
   EXPECT_GT(diff, 100 * kFloatTolerance) << diff;
 }
 
+TEST(WideContacts, RefreshedInertiaReachesThePasses) {
+  // World refreshes the world inverse inertia of an anisotropic body that turned far
+  // within the step (World::integrate_positions) between substeps; the scalar passes
+  // read it from the states, the lanes once refresh_inertia has re-packed it. Every
+  // body's inertia is turned by 0.3 rad between substeps here: with refresh_inertia
+  // the lanes match the scalar passes, without it they keep the build's inertia and
+  // do not (the check can fail).
+  for (const bool refresh : {true, false}) {
+    Scene scalar = random_scene(60, 2, 200, 31);
+    Scene wide = scalar;
+    SolverSettings settings;
+    ContactSoftness soft;
+    const Real h = 1.0 / 240;
+    prepare_contacts(scalar.constraints, scalar.states, settings, h, soft);
+    prepare_contacts(wide.constraints, wide.states, settings, h, soft);
+    const int dummy = static_cast<int>(wide.states.size()) - 1;
+    std::vector<int> order(wide.constraints.size()), bodies;
+    for (std::size_t k = 0; k < order.size(); ++k) order[k] = static_cast<int>(k);
+    for (int i = 2; i < dummy; ++i) bodies.push_back(i);
+    WideContacts w;
+    w.build(wide.constraints, order, wide.states, dummy);
+    const Mat3 turn = Quat(Eigen::AngleAxis<Real>(0.3, Vec3(1, 2, 3).normalized())).toRotationMatrix();
+    for (int sub = 0; sub < 3; ++sub) {
+      warm_start_contacts(scalar.constraints, scalar.states);
+      solve_contacts(scalar.constraints, scalar.states, soft, 1 / h, settings.push_max, true);
+      w.warm_start(wide.states);
+      w.solve(wide.states, soft, 1 / h, settings.push_max, true);
+      for (Scene* s : {&scalar, &wide})
+        for (const int i : bodies) s->states[i].inv_inertia = turn * s->states[i].inv_inertia * turn.transpose();
+      if (refresh) w.refresh_inertia(wide.states, bodies);
+      w.set_motion(wide.states);
+      solve_contacts(scalar.constraints, scalar.states, soft, 1 / h, settings.push_max, false);
+      w.solve(wide.states, soft, 1 / h, settings.push_max, false);
+    }
+    w.unpack(wide.constraints);
+    const Real diff = max_difference(scalar, wide);
+    if (refresh)
+      EXPECT_LT(diff, kFloatTolerance);
+    else
+      EXPECT_GT(diff, 100 * kFloatTolerance) << diff;
+  }
+}
+
 namespace {
 
 /// One constraint between a dynamic body (1) and a static one (0), at rest in the

@@ -42,7 +42,9 @@ struct BodyState {
   /// Gravity acting on the body (m/s^2, world; zero for static and kinematic bodies):
   /// restitution extrapolates an approach speed with it (apply_restitution).
   Vec3 gravity = Vec3::Zero();
-  Mat3 inv_inertia = Mat3::Zero();  ///< world-space inverse inertia at the step's start
+  /// World-space inverse inertia (1/(kg m^2)) at the step's start; World refreshes it
+  /// after a substep for an anisotropic body that has turned far (World::integrate_positions).
+  Mat3 inv_inertia = Mat3::Zero();
 };
 
 /// Spring-damper coefficients of a soft constraint for one substep (Box2D v3 b2Softness).
@@ -334,6 +336,13 @@ class WideContacts {
   /// The motion changes only between passes, so the passes share the turned anchors
   /// instead of each turning them (a third of a pass's arithmetic).
   void set_motion(const std::vector<BodyState>& states);
+  /// Re-reads the world inverse inertia (BodyState::inv_inertia) of `bodies` (state
+  /// indices; ones the constraints do not use are ignored) into the lanes that hold
+  /// them. build() packs each body's inertia once; World refreshes the inertia of an
+  /// anisotropic body that has turned far within the step (World::integrate_positions)
+  /// and calls this before set_motion, so that the passes' impulses and effective masses
+  /// use the inertia the body has now.
+  void refresh_inertia(const std::vector<BodyState>& states, const std::vector<int>& bodies);
   /// The passes of contact_solver.h on the packed contacts, at the motion of the last
   /// set_motion: each reads the bodies' velocities (v, w) from `states` and adds the
   /// velocity changes back.
@@ -357,7 +366,8 @@ class WideContacts {
     bool friction = false;    ///< some lane has friction
     bool stiffened = false;   ///< some point has stiffening > 1 (SolverSettings::max_sag)
     alignas(32) float inv_mass_a[kLanes] = {}, inv_mass_b[kLanes] = {};
-    /// World inverse inertia at the step's start, symmetric: xx, yy, zz, xy, xz, yz.
+    /// World inverse inertia (at the step's start, or as refresh_inertia last set it),
+    /// symmetric: xx, yy, zz, xy, xz, yz.
     alignas(32) float ia[6][kLanes] = {}, ib[6][kLanes] = {};
     alignas(32) float n[3][kLanes] = {}, t1[3][kLanes] = {}, t2[3][kLanes] = {};
     alignas(32) float mu[kLanes] = {};
@@ -418,6 +428,7 @@ class WideContacts {
   std::vector<Row> loaded_;      ///< rows_ as load() wrote them (for the velocity changes)
   std::vector<int> row_state_;   ///< per row: its state index (row 0: dummy)
   std::vector<int> row_moves_;   ///< per row: 1 if its body moves (receives velocity changes)
+  std::vector<std::uint8_t> refresh_;  ///< per row: scratch of refresh_inertia
   std::vector<int> row_of_;      ///< per state: its row, -1 if none (build's scratch)
 };
 
