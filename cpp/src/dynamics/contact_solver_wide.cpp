@@ -204,6 +204,16 @@ WMO_INLINE V3 relative_velocity(const Bodies& a, const Bodies& b, const V3& ra, 
   return (b.v + cross(b.w, rb)) - (a.v + cross(a.w, ra));
 }
 
+/// row_mass() of contact_solver.h, lane by lane: the step's effective mass `stale`
+/// unless the lane turned (`lane_turned`) and the one at the turned anchors, `current`,
+/// differs from it by more than 10%. A padding point (a lane with fewer points, or a
+/// padding lane) has a stale mass of 0 and keeps it: it pushes nothing.
+WMO_INLINE v8 lane_row_mass(v8 stale, v8 current, m8 lane_turned) {
+  const v8 diff = stale - current;
+  const m8 keep = (vmax(diff, -diff) <= splat(0.1f) * current) | (stale == splat(0)) | ~lane_turned;
+  return keep ? stale : current;
+}
+
 /// What the passes read of the motion, for the motion in `rows` (WideContacts::
 /// set_motion): per point its anchors turned with the bodies about their centres of
 /// curvature (current_anchors of contact_solver.cpp), its separation now (at the step's
@@ -232,27 +242,15 @@ WMO_CLONES void turn_groups(Group* groups, int count, const MotionRow* rows, boo
       const V3 rb = rb0 + rotation_offset(b, rb0 + ld(p.cb_n) * n);
       const V3 d = dp + ((rb - rb0) - (ra - ra0));
       st(p.separation, dot(n, d) + ld(p.base_separation));
-      // row_mass(): the step's effective mass unless the one at the turned anchors
-      // differs from it by more than 10%. A padding point (a lane with fewer points,
-      // or a padding lane) has a stale mass of 0 and must keep it: it pushes nothing.
-      v8 normal_mass = ld(p.normal_mass);
-      if (turned) {
-        const v8 current = effective_mass(m, ra, rb, n);
-        const v8 diff = normal_mass - current;
-        const m8 keep = (vmax(diff, -diff) <= splat(0.1f) * current) | (normal_mass == zero) | ~lane_turned;
-        normal_mass = keep ? normal_mass : current;
-      }
-      st(p.mass_now, normal_mass);
+      // The normal row's mass at the turned anchors (lane_row_mass).
+      const v8 normal_mass = ld(p.normal_mass);
+      st(p.mass_now, turned ? lane_row_mass(normal_mass, effective_mass(m, ra, rb, n), lane_turned) : normal_mass);
       if (turned && g.friction) {
         // The tangent rows' masses by the same rule, kept in place: the passes read
         // them from tangent_mass (padding points keep their 0).
-        for (int r = 0; r < 2; ++r) {
-          const v8 stale = ld(p.tangent_mass[r]);
-          const v8 current = effective_mass(m, ra, rb, r == 0 ? t1 : t2);
-          const v8 diff = stale - current;
-          const m8 keep = (vmax(diff, -diff) <= splat(0.1f) * current) | (stale == zero) | ~lane_turned;
-          st(p.tangent_mass[r], keep ? stale : current);
-        }
+        for (int r = 0; r < 2; ++r)
+          st(p.tangent_mass[r],
+             lane_row_mass(ld(p.tangent_mass[r]), effective_mass(m, ra, rb, r == 0 ? t1 : t2), lane_turned));
       }
       for (int r = 0; r < 3; ++r) {
         st(p.ra_now[r], r == 0 ? ra.x : r == 1 ? ra.y : ra.z);
