@@ -50,3 +50,26 @@ TEST(FlatMap, AgreesWithUnorderedMapUnderRandomOperations) {
   EXPECT_EQ(map.size(), 0u);
   EXPECT_EQ(map.find(pool[0]), -1);
 }
+
+TEST(FlatMap, ManifoldKeysAreExact) {
+  // Keys that differ only in the children's high bits (triangles 256 and 65,536 apart,
+  // a child index of -1) are distinct entries: the cache once kept 8 bits per child.
+  FlatMap<int, ManifoldKey> map;
+  const std::uint64_t pair = (std::uint64_t{3} << 32) | 7;
+  const std::int32_t children[][2] = {{0, -1}, {256, -1}, {65536, -1}, {-1, -1}, {-1, 0}, {-1, 256}, {1, 2}, {257, 2}};
+  for (int k = 0; k < 8; ++k) {
+    const ManifoldKey key{pair, (std::uint64_t{static_cast<std::uint32_t>(children[k][0])} << 32) |
+                                    static_cast<std::uint32_t>(children[k][1])};
+    EXPECT_LT(map.find(key), 0) << k;
+    map.value(map.insert(key)) = k;
+  }
+  EXPECT_EQ(map.size(), 8u);
+  for (int k = 0; k < 8; ++k) {
+    const ManifoldKey key{pair, (std::uint64_t{static_cast<std::uint32_t>(children[k][0])} << 32) |
+                                    static_cast<std::uint32_t>(children[k][1])};
+    ASSERT_GE(map.find(key), 0);
+    EXPECT_EQ(map.value(map.find(key)), k);
+  }
+  // Another pair with the same children is another entry.
+  EXPECT_LT(map.find(ManifoldKey{pair + 1, 0}), 0);
+}

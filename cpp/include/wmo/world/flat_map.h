@@ -1,5 +1,5 @@
-// WMO world layer: an open-addressing hash map from 64-bit keys to values, for the
-// contact cache.
+// WMO world layer: an open-addressing hash map from 64-bit (or ManifoldKey) keys to
+// values, for the contact cache.
 //
 // The values live in one dense array (in insertion order, compacted by erase_if) and
 // are reached by index; the table holds (key, index) pairs with linear probing at a
@@ -18,11 +18,28 @@
 
 namespace wmo {
 
-template <class V>
+/// The contact cache's key: a pair of body slots and the children of a composite pair
+/// (triangle or compound child indices, -1 for none), exactly. (A single 64-bit key
+/// kept 8 bits of each child index: triangles 256 apart in a mesh shared one cache
+/// entry, and a box lying across two of them got each one's impulses from the other.)
+struct ManifoldKey {
+  std::uint64_t pair = 0;      ///< slot_a << 32 | slot_b
+  std::uint64_t children = 0;  ///< uint32(child_a) << 32 | uint32(child_b)
+  friend bool operator==(const ManifoldKey&, const ManifoldKey&) = default;
+};
+
+/// Fibonacci hashing: the high half of the product with an odd constant, where every
+/// bit of the key has mixed in (the table masks it to its size).
+inline std::size_t flat_map_hash(std::uint64_t key) { return static_cast<std::size_t>((key * 0x9E3779B97F4A7C15ull) >> 32); }
+inline std::size_t flat_map_hash(const ManifoldKey& key) {
+  return static_cast<std::size_t>(((key.pair * 0x9E3779B97F4A7C15ull) ^ (key.children * 0xC2B2AE3D27D4EB4Full)) >> 32);
+}
+
+template <class V, class K = std::uint64_t>
 class FlatMap {
  public:
   /// Index of the value for `key`, or -1.
-  int find(std::uint64_t key) const {
+  int find(const K& key) const {
     if (slots_.empty()) return -1;
     for (std::size_t s = home(key);; s = (s + 1) & mask_) {
       const Slot& slot = slots_[s];
@@ -31,7 +48,7 @@ class FlatMap {
     }
   }
   /// Index of the value for `key`, inserted (value-initialised) if absent.
-  int insert(std::uint64_t key) {
+  int insert(const K& key) {
     if (2 * (values_.size() + 1) > slots_.size()) rehash(slots_.empty() ? 64 : 2 * slots_.size());
     std::size_t s = home(key);
     for (;; s = (s + 1) & mask_) {
@@ -49,10 +66,10 @@ class FlatMap {
   /// table's calls the first a few keys ahead and the second fewer, so neither load
   /// waits on memory (measured on the pyramid: the slot and value loads were 40% of
   /// the narrowphase's pair routine).
-  void prefetch_slot(std::uint64_t key) const {
+  void prefetch_slot(const K& key) const {
     if (!slots_.empty()) __builtin_prefetch(&slots_[home(key)]);
   }
-  void prefetch_value(std::uint64_t key) const {
+  void prefetch_value(const K& key) const {
     const int i = find(key);
     if (i < 0) return;
     const char* p = reinterpret_cast<const char*>(&values_[i]);
@@ -60,7 +77,7 @@ class FlatMap {
   }
   V& value(int index) { return values_[index]; }
   const V& value(int index) const { return values_[index]; }
-  std::uint64_t key(int index) const { return keys_[index]; }
+  const K& key(int index) const { return keys_[index]; }
   std::size_t size() const { return values_.size(); }
   bool empty() const { return values_.empty(); }
   void clear() {
@@ -89,13 +106,13 @@ class FlatMap {
 
  private:
   struct Slot {
-    std::uint64_t key = 0;
+    K key{};
     int index = -1;  ///< into values_, -1 for an empty slot
   };
-  std::size_t home(std::uint64_t key) const {
-    // Fibonacci hashing: the slot keys pack two body slots in their high bits, which a
+  std::size_t home(const K& key) const {
+    // Hashed (flat_map_hash): the keys pack two body slots in their high bits, which a
     // plain mask would ignore.
-    return static_cast<std::size_t>((key * 0x9E3779B97F4A7C15ull) >> 32) & mask_;
+    return flat_map_hash(key) & mask_;
   }
   void rehash(std::size_t capacity) {
     slots_.assign(capacity, Slot{});
@@ -109,7 +126,7 @@ class FlatMap {
 
   std::vector<Slot> slots_;  ///< power-of-two size, at least twice the entries
   std::size_t mask_ = 0;
-  std::vector<std::uint64_t> keys_;
+  std::vector<K> keys_;
   std::vector<V> values_;
 };
 
