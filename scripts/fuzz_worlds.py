@@ -5,7 +5,7 @@ Not a test (it runs for as long as it is told to); the named stability tests in
 tests/python/test_stability.py pin what it found. Each seed builds one scene:
 
   * a container of static walls and a lid, with a ground that is a box, a plane, or a
-    rolling triangle mesh (one- or two-sided);
+    rolling triangle mesh (one- or two-sided), reaching under the walls;
   * 10 to 40 dynamic bodies of random shape (sphere, box, capsule, cylinder, flat or
     long hulls, a box-and-ball compound), sizes 5 cm to 1 m log-uniform, densities
     10 to 10,000 kg/m^3 (mass ratios up to ~1e7), random friction and restitution,
@@ -59,11 +59,11 @@ def random_shape(rng):
 
 
 def rolling_ground(rng, one_sided):
-    xs = np.linspace(-10, 10, 11)
+    xs = np.linspace(-12, 12, 13)  # under the walls too: no seam at their feet
     amp = rng.uniform(0, 0.5)
     v = np.array([(x, amp * np.sin(x + z), z) for x in xs for z in xs])
-    t = [tri for i in range(10) for j in range(10)
-         for tri in ((11 * i + j, 11 * i + j + 1, 11 * i + j + 11), (11 * i + j + 1, 11 * i + j + 12, 11 * i + j + 11))]
+    t = [tri for i in range(12) for j in range(12)
+         for tri in ((13 * i + j, 13 * i + j + 1, 13 * i + j + 13), (13 * i + j + 1, 13 * i + j + 14, 13 * i + j + 13))]
     return wmo.TriangleMesh(v, t, one_sided=one_sided)
 
 
@@ -88,7 +88,7 @@ def build(seed, ccd_share, grounds=GROUNDS):
     w = wmo.World(**settings)
     ground = GROUNDS.index(grounds[int(rng.integers(0, len(grounds)))])
     if ground == 0:
-        w.add_body(wmo.Box((10, 0.5, 10)), position=(0, -0.5, 0), kind="static")
+        w.add_body(wmo.Box((12, 0.5, 12)), position=(0, -0.5, 0), kind="static")
     elif ground == 1:
         w.add_body(wmo.Plane((0, 1, 0), 0), kind="static")
     else:

@@ -120,6 +120,29 @@ def test_a_one_sided_mesh_ground_pushes_a_sunken_box_back_up():
             assert box.position[1] < -5
 
 
+@pytest.mark.parametrize("heavy, drop", [(10.0, 0.05), (10.0, 0.3), (10.0, 1.0), (100.0, 0.3)])
+def test_a_thin_plate_pressed_through_a_one_sided_mesh_ground_is_pushed_back(heavy, drop):
+    # A 10 g plate 1 mm thick on a one-sided triangle-mesh ground, a 10 or 100 kg box
+    # dropped on it, CCD on both, 10 s. The box lands and presses the plate into the
+    # ground: its top never more than 1 mm below the surface (measured: 0.1-0.2 mm) and
+    # it ends there, under the box. A body wholly behind a one-sided triangle is behind
+    # the solid and gets no contact; the plate, pushed that far within one step, was
+    # dropped and fell away (measured: 60-100 m below after 5 s). The world now tells
+    # the narrowphase which triangles the pair touched at the last step
+    # (CollideSettings::touched_before), and those push it back out.
+    v = [[-5, 0, -5], [5, 0, -5], [5, 0, 5], [-5, 0, 5]]
+    w = wmo.World(sleeping=False)
+    w.add_body(wmo.TriangleMesh(v, [[0, 2, 1], [0, 3, 2]], one_sided=True), kind="static")
+    plate = w.add_body(wmo.Box((0.3, 0.0005, 0.3)), position=(0, 0.0005, 0), mass=0.01, ccd=True)
+    w.add_body(wmo.Box((0.25, 0.25, 0.25)), position=(0.05, 0.251 + drop, 0.02), mass=heavy, ccd=True)
+    lowest = 0.0
+    for _ in range(600):
+        w.step()
+        lowest = min(lowest, plate.position[1] + 0.0005)
+    assert lowest > -0.001
+    assert abs(plate.position[1]) < 0.002
+
+
 @pytest.mark.parametrize("seed", range(1, 11))
 def test_random_piles_on_a_one_sided_mesh_ground_with_ccd_never_escape(seed):
     # 30 random bodies (spheres, boxes, capsules, cylinders, flat or long hulls, compounds;

@@ -54,7 +54,10 @@
 // along n from the clipping (a body apart from T but reaching in front of its plane, such
 // as one sliding into a valley towards the rising face ahead, gets that face's
 // speculative points; dropped, a 2 cm disc sliding at 6.5 m/s met the face only once
-// it was wholly behind it, and fell). The rule then runs for the front side only, and where it
+// it was wholly behind it, and fell; a world passes its contact cache, so that a body
+// that touched T at the last step and was pushed wholly behind it within one step, as a
+// thin plate under a box landing on it, is pushed back out rather than dropped). The
+// rule then runs for the front side only, and where it
 // turns N into the face normal the side is always the front. A two-sided ground lets a
 // body whose centre was driven through it (a 2 g sliver spinning at 415 rad/s landing
 // at 16 m/s; a pile pressing a hull down) be pushed out below and fall away: a random-
@@ -375,11 +378,14 @@ void collide_triangle(const MeshContext& ctx, int t, std::vector<Manifold>& out)
   } else if (one_sided && !(N.dot(n) > std::sin(kFeatureAngle))) {
     // One-sided (file comment): a contact whose way out is not through T's front.
     // Apart from T with all of B behind T's plane: B is behind the solid's surface, no
-    // contact. Otherwise (overlapping T, or apart from it and reaching in front of its
+    // contact, unless the caller's history says B touched T at its last step
+    // (CollideSettings::touched_before: pushed through within a step). Otherwise (overlapping T, or apart from it and reaching in front of its
     // plane, as a body sliding into a valley is beside the rising face ahead of it):
     // out through the front, along the face normal; the clipping below keeps what lies
     // over T within the margin and gives the depths.
-    if (r.distance > 0 && reach(n) < offset) return;
+    if (r.distance > 0 && reach(n) < offset &&
+        !(ctx.settings.touched_before && ctx.settings.touched_before(ctx.settings.touched_context, t)))
+      return;
     N = n;
     modified = true;
   }

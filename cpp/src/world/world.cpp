@@ -1012,7 +1012,36 @@ void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseO
     }
     ++out.reused;
   } else {
-    collide(*shapes_[a], pose_a, *shapes_[b], pose_b, out.manifolds, cs);
+    // A one-sided mesh asks whether the pair touched a triangle at the last step (the
+    // cache holds the last step's manifolds until store_impulses): a body pushed wholly
+    // behind a triangle within one step is pushed back out (CollideSettings::
+    // touched_before). The other side's children: a compound's, or none (-1).
+    struct Touched {
+      const FlatMap<CachedManifold, ManifoldKey>* cache;
+      int sa, sb, other_children;
+      bool mesh_first;
+    } touched{};
+    const Shape& sha = *shapes_[a];
+    const Shape& shb = *shapes_[b];
+    const bool mesh_a = sha.type() == ShapeType::kTriangleMesh && static_cast<const TriangleMesh&>(sha).one_sided();
+    const bool mesh_b = shb.type() == ShapeType::kTriangleMesh && static_cast<const TriangleMesh&>(shb).one_sided();
+    if ((mesh_a || mesh_b) && !cache_.empty()) {
+      const Shape& other = mesh_a ? shb : sha;
+      touched = {&cache_, sa, sb,
+                 other.type() == ShapeType::kCompound
+                     ? static_cast<int>(static_cast<const Compound&>(other).children().size())
+                     : 0,
+                 mesh_a};
+      cs.touched_context = &touched;
+      cs.touched_before = [](const void* context, int t) {
+        const Touched& q = *static_cast<const Touched*>(context);
+        for (int c = q.other_children > 0 ? 0 : -1; c < std::max(q.other_children, 0); ++c)
+          if (q.cache->find(q.mesh_first ? manifold_key(q.sa, q.sb, t, c) : manifold_key(q.sa, q.sb, c, t)) >= 0)
+            return true;
+        return false;
+      };
+    }
+    collide(sha, pose_a, shb, pose_b, out.manifolds, cs);
   }
   if (out.manifolds.empty()) return;
   // What the cache keeps of this pair's manifold (store_impulses).

@@ -2,6 +2,8 @@
 // feature ids, and no heap allocation per query.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+
 #include <atomic>
 #include <cmath>
 #include <cstdlib>
@@ -490,6 +492,44 @@ TEST(CollideMesh, OneSidedIgnoresWhatIsBehindAndApart) {
     EXPECT_EQ(one[k].count, two[k].count);
     EXPECT_EQ(one[k].points[0].depth, two[k].points[0].depth);
   }
+}
+
+TEST(CollideMesh, OneSidedKeepsWhatTouchedATriangleAtTheLastStep) {
+  // A thin box wholly behind a one-sided grid (its top 1 mm below) and apart from it:
+  // no contact by itself; with a history saying the pair touched the triangles it lies
+  // under (CollideSettings::touched_before), a contact through the front (+z) whose
+  // depth is how far its underside is below the plane (3 mm), on those triangles only.
+  const TriangleMesh grid = make_grid(4, 0.5, Vec3(-1, -1, 0), true);
+  const Box plate(Vec3(0.1, 0.1, 0.001));
+  const Pose below(Vec3(0.25, 0.2, -0.002));
+  EXPECT_TRUE(collide(grid, plate, below, true, 0.01).empty());
+  struct History {
+    std::vector<int> touched;
+    int asked = 0;
+  } history;
+  CollideSettings s;
+  s.margin = 0.01;
+  s.touched_context = &history;
+  s.touched_before = [](const void* context, int t) {
+    auto& h = *const_cast<History*>(static_cast<const History*>(context));
+    ++h.asked;
+    return std::find(h.touched.begin(), h.touched.end(), t) != h.touched.end();
+  };
+  std::vector<Manifold> out;
+  collide_mesh_convex(grid, plate, below, s, out);
+  EXPECT_TRUE(out.empty());  // no triangle touched before
+  EXPECT_GT(history.asked, 0);
+  // The plate lies over the quad (i, j) = (2, 2), triangles 20 and 21.
+  history.touched = {20, 21};
+  collide_mesh_convex(grid, plate, below, s, out);
+  ASSERT_FALSE(out.empty());
+  Real deepest = 0;
+  for (const Manifold& m : out) {
+    EXPECT_TRUE(m.child_a == 20 || m.child_a == 21) << m.child_a;
+    EXPECT_NEAR(m.normal.z(), 1.0, 1e-12);
+    for (int k = 0; k < m.count; ++k) deepest = std::max(deepest, m.points[k].depth);
+  }
+  EXPECT_NEAR(deepest, 0.003, 1e-9);
 }
 
 TEST(CollideMesh, OneSidedCubeFromInside) {

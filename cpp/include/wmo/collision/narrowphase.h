@@ -29,6 +29,15 @@ struct CollideSettings {
   /// catching on its edges. False keeps the raw per-triangle GJK/EPA normals; meant for
   /// tests and comparisons.
   bool remove_internal_edges = true;
+  /// One-sided triangle meshes (TriangleMesh::one_sided): a convex shape wholly behind
+  /// a triangle's plane and apart from it is behind the solid's surface, and the
+  /// triangle reports no contact, unless `touched_before(touched_context, t)` is true
+  /// for that triangle t: the caller had a contact of this pair with it at its last
+  /// step (a world: its contact cache), so the shape was pushed through the surface
+  /// within one step, and the contact pushes it back out through the front. Null (the
+  /// default): no history, the plain rule.
+  bool (*touched_before)(const void* touched_context, int triangle) = nullptr;
+  const void* touched_context = nullptr;
   GjkSettings gjk{};
   EpaSettings epa{};
 };
