@@ -348,6 +348,20 @@ void add_rim_points(const MeshContext& ctx, const std::array<Vec3, 3>& v, const 
   }
 }
 
+// True if the caller's history says B touched triangle t or one of its edge neighbours
+// at its last step (CollideSettings::touched_before; the neighbours because a body
+// pushed through a one-sided surface near an edge may end up behind the next triangle).
+bool touched_near(const MeshContext& ctx, int t) {
+  const CollideSettings& s = ctx.settings;
+  if (!s.touched_before) return false;
+  if (s.touched_before(s.touched_context, t)) return true;
+  for (int e = 0; e < 3; ++e) {
+    const int u = ctx.mesh.neighbor(t, e);
+    if (u >= 0 && s.touched_before(s.touched_context, u)) return true;
+  }
+  return false;
+}
+
 // Contact of triangle t with B; appends a manifold to `out` if it touches within the
 // margin.
 void collide_triangle(const MeshContext& ctx, int t, std::vector<Manifold>& out) {
@@ -383,9 +397,7 @@ void collide_triangle(const MeshContext& ctx, int t, std::vector<Manifold>& out)
     // plane, as a body sliding into a valley is beside the rising face ahead of it):
     // out through the front, along the face normal; the clipping below keeps what lies
     // over T within the margin and gives the depths.
-    if (r.distance > 0 && reach(n) < offset &&
-        !(ctx.settings.touched_before && ctx.settings.touched_before(ctx.settings.touched_context, t)))
-      return;
+    if (r.distance > 0 && reach(n) < offset && !touched_near(ctx, t)) return;
     N = n;
     modified = true;
   }
