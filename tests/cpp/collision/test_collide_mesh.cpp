@@ -530,6 +530,21 @@ TEST(CollideMesh, OneSidedKeepsWhatTouchedATriangleAtTheLastStep) {
     for (int k = 0; k < m.count; ++k) deepest = std::max(deepest, m.points[k].depth);
   }
   EXPECT_NEAR(deepest, 0.003, 1e-9);
+  // A triangle whose edge neighbour was touched counts too (a body pushed through near
+  // an edge ends up behind the next triangle); a far one does not.
+  int outside = -1;
+  for (int e = 0; e < 3; ++e)
+    if (const int u = grid.neighbor(20, e); u >= 0 && u != 21) outside = u;
+  ASSERT_GE(outside, 0);
+  history.touched = {outside};
+  out.clear();
+  collide_mesh_convex(grid, plate, below, s, out);
+  ASSERT_FALSE(out.empty());
+  for (const Manifold& m : out) EXPECT_EQ(m.child_a, 20);
+  history.touched = {0};
+  out.clear();
+  collide_mesh_convex(grid, plate, below, s, out);
+  EXPECT_TRUE(out.empty());
 }
 
 TEST(CollideMesh, OneSidedCubeFromInside) {
