@@ -348,18 +348,20 @@ void add_rim_points(const MeshContext& ctx, const std::array<Vec3, 3>& v, const 
   }
 }
 
-// True if the caller's history says B touched triangle t or one of its edge neighbours
-// at its last step (CollideSettings::touched_before; the neighbours because a body
-// pushed through a one-sided surface near an edge may end up behind the next triangle).
-bool touched_near(const MeshContext& ctx, int t) {
+// The side (+1 front, -1 back) from which the caller's history says B touched triangle t
+// at its last step, or one of its edge neighbours (a body pushed through a surface near
+// an edge may end up behind the next triangle); 0 if none (CollideSettings::
+// touched_before).
+int touched_near(const MeshContext& ctx, int t) {
   const CollideSettings& s = ctx.settings;
-  if (!s.touched_before) return false;
-  if (s.touched_before(s.touched_context, t)) return true;
+  if (!s.touched_before) return 0;
+  if (const int side = s.touched_before(s.touched_context, t)) return side;
   for (int e = 0; e < 3; ++e) {
     const int u = ctx.mesh.neighbor(t, e);
-    if (u >= 0 && s.touched_before(s.touched_context, u)) return true;
+    if (u < 0) continue;
+    if (const int side = s.touched_before(s.touched_context, u)) return side;
   }
-  return false;
+  return 0;
 }
 
 // Contact of triangle t with B; appends a manifold to `out` if it touches within the
@@ -382,12 +384,21 @@ void collide_triangle(const MeshContext& ctx, int t, std::vector<Manifold>& out)
   bool modified = false;
   const Real nn = N.norm();
   const bool one_sided = mesh.one_sided();
+  // The side B must be pushed out through: a one-sided mesh's front; for a two-sided
+  // one the side the pair touched T (or a neighbour) from at the caller's last step
+  // (CollideSettings::touched_before); 0: free, the rules below choose.
+  const int front = one_sided ? 1 : touched_near(ctx, t);
   auto reach = [&](const Vec3& d) {  // max over B of d.x, mesh frame (radius included)
     return d.dot(ctx.b_in_a.transform_point(ctx.b.support_core(ctx.rot.transpose() * d))) + ctx.b.radius();
   };
   const Real offset = n.dot(v[0]);  // T's plane: {x : n.x = offset}
   if (!(nn > 0.5) || !N.allFinite()) {  // unit or zero by contract; zero: degenerate
-    N = (one_sided ? 1 : centre_side) * n;
+    N = (front != 0 ? front : centre_side) * n;
+    modified = true;
+  } else if (!one_sided && front != 0 && !(N.dot(front * n) > std::sin(kFeatureAngle))) {
+    // Two-sided, touched from `front` at the last step: B was pressed past the sheet
+    // within one step; out the way it came, as a one-sided mesh would push it.
+    N = front * n;
     modified = true;
   } else if (one_sided && !(N.dot(n) > std::sin(kFeatureAngle))) {
     // One-sided (file comment): a contact whose way out is not through T's front.
@@ -397,7 +408,7 @@ void collide_triangle(const MeshContext& ctx, int t, std::vector<Manifold>& out)
     // plane, as a body sliding into a valley is beside the rising face ahead of it):
     // out through the front, along the face normal; the clipping below keeps what lies
     // over T within the margin and gives the depths.
-    if (r.distance > 0 && reach(n) < offset && !touched_near(ctx, t)) return;
+    if (r.distance > 0 && reach(n) < offset && touched_near(ctx, t) == 0) return;
     N = n;
     modified = true;
   }
@@ -431,8 +442,8 @@ void collide_triangle(const MeshContext& ctx, int t, std::vector<Manifold>& out)
       // it against that of its highest point above it (support points, radius
       // included); B's centre decides a tie. Every triangle of a flat patch then
       // agrees.
-      int side = 1;  // a one-sided mesh's is always the front
-      if (!one_sided) {
+      int side = front;  // a one-sided mesh's is always the front; a touched one's kept
+      if (side == 0) {
         const Real below = offset + reach(-n);  // how far B reaches below T's plane
         const Real above = reach(n) - offset;   // ... and above it
         const Real tie = 1e-9 * (std::abs(below) + std::abs(above));

@@ -1012,10 +1012,11 @@ void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseO
     }
     ++out.reused;
   } else {
-    // A one-sided mesh asks whether the pair touched a triangle at the last step (the
-    // cache holds the last step's manifolds until store_impulses): a body pushed wholly
-    // behind a triangle within one step is pushed back out (CollideSettings::
-    // touched_before). The other side's children: a compound's, or none (-1).
+    // A mesh asks whether, and from which side, the pair touched a triangle at the last
+    // step (the cache holds the last step's manifolds until store_impulses): a body
+    // pushed behind a one-sided triangle, or past a two-sided one's middle, within one
+    // step is pushed back out the way it came (CollideSettings::touched_before). The
+    // other side's children: a compound's, or none (-1).
     struct Touched {
       const FlatMap<CachedManifold, ManifoldKey>* cache;
       int sa, sb, other_children;
@@ -1023,8 +1024,7 @@ void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseO
     } touched{};
     const Shape& sha = *shapes_[a];
     const Shape& shb = *shapes_[b];
-    const bool mesh_a = sha.type() == ShapeType::kTriangleMesh && static_cast<const TriangleMesh&>(sha).one_sided();
-    const bool mesh_b = shb.type() == ShapeType::kTriangleMesh && static_cast<const TriangleMesh&>(shb).one_sided();
+    const bool mesh_a = sha.type() == ShapeType::kTriangleMesh, mesh_b = shb.type() == ShapeType::kTriangleMesh;
     if ((mesh_a || mesh_b) && !cache_.empty()) {
       const Shape& other = mesh_a ? shb : sha;
       touched = {&cache_, sa, sb,
@@ -1035,10 +1035,11 @@ void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseO
       cs.touched_context = &touched;
       cs.touched_before = [](const void* context, int t) {
         const Touched& q = *static_cast<const Touched*>(context);
-        for (int c = q.other_children > 0 ? 0 : -1; c < std::max(q.other_children, 0); ++c)
-          if (q.cache->find(q.mesh_first ? manifold_key(q.sa, q.sb, t, c) : manifold_key(q.sa, q.sb, c, t)) >= 0)
-            return true;
-        return false;
+        for (int c = q.other_children > 0 ? 0 : -1; c < std::max(q.other_children, 0); ++c) {
+          const int i = q.cache->find(q.mesh_first ? manifold_key(q.sa, q.sb, t, c) : manifold_key(q.sa, q.sb, c, t));
+          if (i >= 0 && q.cache->value(i).geometry.mesh_side != 0) return static_cast<int>(q.cache->value(i).geometry.mesh_side);
+        }
+        return 0;
       };
     }
     collide(sha, pose_a, shb, pose_b, out.manifolds, cs);
@@ -1109,6 +1110,15 @@ void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseO
     }
     out.keys.push_back(key);
     out.geometry.push_back(geometry);
+    if (m.child_a >= 0 && shapes_[a]->type() == ShapeType::kTriangleMesh) {
+      // The side of the triangle the other body touched (ManifoldGeometry::mesh_side):
+      // the normal points from the mesh to it.
+      const Vec3 n = rot_a * static_cast<const TriangleMesh&>(*shapes_[a]).triangle_normal(m.child_a);
+      out.geometry.back().mesh_side = m.normal.dot(n) >= 0 ? 1 : -1;
+    } else if (m.child_b >= 0 && shapes_[b]->type() == ShapeType::kTriangleMesh) {
+      const Vec3 n = rot_b * static_cast<const TriangleMesh&>(*shapes_[b]).triangle_normal(m.child_b);
+      out.geometry.back().mesh_side = m.normal.dot(n) <= 0 ? 1 : -1;
+    }
     out.entries.push_back(cached_index);
   }
 }

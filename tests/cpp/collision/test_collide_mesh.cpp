@@ -513,7 +513,7 @@ TEST(CollideMesh, OneSidedKeepsWhatTouchedATriangleAtTheLastStep) {
   s.touched_before = [](const void* context, int t) {
     auto& h = *const_cast<History*>(static_cast<const History*>(context));
     ++h.asked;
-    return std::find(h.touched.begin(), h.touched.end(), t) != h.touched.end();
+    return std::find(h.touched.begin(), h.touched.end(), t) != h.touched.end() ? 1 : 0;  // from the front
   };
   std::vector<Manifold> out;
   collide_mesh_convex(grid, plate, below, s, out);

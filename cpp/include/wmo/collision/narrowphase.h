@@ -29,14 +29,20 @@ struct CollideSettings {
   /// catching on its edges. False keeps the raw per-triangle GJK/EPA normals; meant for
   /// tests and comparisons.
   bool remove_internal_edges = true;
-  /// One-sided triangle meshes (TriangleMesh::one_sided): a convex shape wholly behind
-  /// a triangle's plane and apart from it is behind the solid's surface, and the
-  /// triangle reports no contact, unless `touched_before(touched_context, t)` is true
-  /// for that triangle t: the caller had a contact of this pair with it at its last
-  /// step (a world: its contact cache), so the shape was pushed through the surface
-  /// within one step, and the contact pushes it back out through the front. Null (the
-  /// default): no history, the plain rule.
-  bool (*touched_before)(const void* touched_context, int triangle) = nullptr;
+  /// Contact history for triangle meshes (a world passes its contact cache):
+  /// `touched_before(touched_context, t)` is +1 if the pair had a contact with triangle
+  /// t at the caller's last step from its front, -1 from its back, 0 if none. A
+  /// triangle whose edge neighbour the pair touched counts as touched from the same
+  /// side (a body pushed through near an edge ends up behind the next triangle).
+  ///  * One-sided meshes (TriangleMesh::one_sided): a shape wholly behind a triangle's
+  ///    plane and apart from it is behind the solid's surface and gets no contact,
+  ///    unless the pair touched the triangle: it was pushed through within one step,
+  ///    and the contact pushes it back out through the front.
+  ///  * Two-sided meshes: a touched triangle keeps the side it was touched from, so a
+  ///    body pressed past the sheet's middle within one step (a thin plate under a box
+  ///    landing on it) is pushed back, not out through the other side.
+  /// Null (the default): no history, each triangle decides alone.
+  int (*touched_before)(const void* touched_context, int triangle) = nullptr;
   const void* touched_context = nullptr;
   GjkSettings gjk{};
   EpaSettings epa{};

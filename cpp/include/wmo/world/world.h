@@ -448,6 +448,9 @@ class World {
     std::array<Vec3, 4> point_a{};     ///< A's frame
     std::array<Vec3, 4> point_b{};     ///< B's frame
     std::array<std::uint32_t, 4> feature_id{};
+    /// Mesh pairs: +1 if the convex body touched the triangle from its front, -1 from
+    /// its back (CollideSettings::touched_before at the next step); 0 otherwise.
+    std::int8_t mesh_side = 0;
   };
   struct CachedManifold {
     std::uint64_t stamp = 0;  ///< the step (step_count + 1) that last wrote it
