@@ -547,6 +547,36 @@ TEST(CollideMesh, OneSidedKeepsWhatTouchedATriangleAtTheLastStep) {
   EXPECT_TRUE(out.empty());
 }
 
+TEST(CollideMesh, TwoSidedKeepsTheSideATriangleWasTouchedFrom) {
+  // A 4 mm plate whose centre is 0.5 mm below a two-sided grid: less of it has passed
+  // below, so by itself it is pushed out downwards. With a history saying the pair
+  // touched those triangles from the front (+1), it is pushed back up, its underside
+  // 2.5 mm deep; from the back (-1), down as before.
+  const TriangleMesh grid = make_grid(4, 0.5, Vec3(-1, -1, 0));
+  const Box plate(Vec3(0.1, 0.1, 0.002));
+  const Pose pressed(Vec3(0.25, 0.2, -0.0005));
+  for (const Manifold& m : collide(grid, plate, pressed, true, 0.01)) EXPECT_NEAR(m.normal.z(), -1.0, 1e-12);
+  struct History {
+    int side = 0;
+  } history;
+  CollideSettings s;
+  s.margin = 0.01;
+  s.touched_context = &history;
+  s.touched_before = [](const void* context, int) { return static_cast<const History*>(context)->side; };
+  for (const int side : {1, -1}) {
+    history.side = side;
+    std::vector<Manifold> out;
+    collide_mesh_convex(grid, plate, pressed, s, out);
+    ASSERT_FALSE(out.empty());
+    Real deepest = 0;
+    for (const Manifold& m : out) {
+      EXPECT_NEAR(m.normal.z(), side, 1e-12);
+      for (int k = 0; k < m.count; ++k) deepest = std::max(deepest, m.points[k].depth);
+    }
+    EXPECT_NEAR(deepest, side > 0 ? 0.0025 : 0.0015, 1e-9);
+  }
+}
+
 TEST(CollideMesh, OneSidedCubeFromInside) {
   // A ball inside a one-sided (outward-wound) cube near its +X wall overlaps it: pushed
   // out through the wall (+X) by the depth of its innermost point (0.4 m), not back
