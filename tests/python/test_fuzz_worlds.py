@@ -2,11 +2,9 @@
 bodies added and removed; 2000 steps each), pinned: the seeds that found a defect, now
 fixed, must hold, and the ones that still fail are strict xfails saying why.
 
-All on the grounds that must hold a body (box, plane, one-sided mesh), with CCD on every
-dynamic body: there, losing a body through the ground or the walls, or any non-finite
-state, is a defect. (A two-sided mesh ground lets a body whose centre was driven
-through it be pushed out below, and a body without CCD may tunnel: fuzz_worlds.py
-reports those too, as known limits.)"""
+With CCD on every dynamic body, losing a body through the ground or the walls, or any
+non-finite state, is a defect. (A body without CCD may tunnel through a thin wall:
+fuzz_worlds.py reports those too, as a known limit.)"""
 from __future__ import annotations
 
 import importlib.util
@@ -22,8 +20,8 @@ _spec.loader.exec_module(fuzz)
 GROUNDS = ("box", "plane", "one-sided")
 
 
-def _run(seed):
-    why, _settings = fuzz.run(seed, 2000, 1.0, GROUNDS)
+def _run(seed, grounds=GROUNDS):
+    why, _settings = fuzz.run(seed, 2000, 1.0, grounds)
     return why
 
 
@@ -52,4 +50,25 @@ def test_a_random_world_that_found_a_defect_now_holds(seed):
 @pytest.mark.parametrize("seed", [74, 415, 765])
 def test_a_random_world_with_a_sandwiched_light_body_holds(seed):
     why = _run(seed)
+    assert why is None, f"seed {seed}: {why}"
+
+
+@pytest.mark.parametrize("seed", [6, 10, 11])
+def test_a_random_world_on_a_two_sided_mesh_ground_holds(seed):
+    # Two-sided mesh grounds: the engine of commit 11da153 lost a body in 95 of seeds
+    # 1-200 (these three among them), pressed past the sheet's middle within one step
+    # and pushed out below; now 5 of 200, since a touched triangle keeps the side it
+    # was touched from.
+    why = _run(seed, ("two-sided",))
+    assert why is None, f"seed {seed}: {why}"
+
+
+@pytest.mark.xfail(strict=True, reason="issue 3, open: two-sided mesh grounds still lose a body in 5 of "
+                   "seeds 1-200: a body that got (partly) behind the sheet, e.g. at the foot of a wall, "
+                   "keeps the back side it touched from and is pushed down through (seed 62: a 566 kg "
+                   "box against a wall); seed 52 (a 106 kg hull) is lost only since triangles keep their "
+                   "side (the engine of commit 11da153 held it). Use one_sided=True for grounds")
+@pytest.mark.parametrize("seed", [52, 62])
+def test_a_random_world_on_a_two_sided_mesh_ground_with_a_body_behind_it_holds(seed):
+    why = _run(seed, ("two-sided",))
     assert why is None, f"seed {seed}: {why}"
