@@ -2065,8 +2065,8 @@ int World::project_ccd_overlaps() {
       // The deepest point on this contact's side: manifolds whose normal opposes the
       // step's (c.normal) are another triangle of a two-sided mesh seen from its back,
       // or a convex pair already more than half way through. Pushed along those, a
-      // body goes through the surface: a random-scene fuzz (scripts/fuzz_worlds.py,
-      // seed 14) had a 24 kg compound resting on a two-sided mesh ground whose fresh
+      // body goes through the surface: a random-scene fuzz (scripts/fuzz_worlds.py)
+      // had a 24 kg compound resting on a two-sided mesh ground whose fresh
       // collision, after the solve, found one triangle from below 0.36 m deep: the
       // push took the body 0.35 m down in one step, the ground then pushed it out
       // below. Such a triangle is pushed by its own contact, if the step had one.
@@ -2346,7 +2346,7 @@ int World::continuous_step() {
       // (without it, w is constant along the swept path and is kept). Kept in the world
       // frame instead, a thin rod (inertia 1:383) spinning about its long axis hit a
       // wall with that w now across it: 108 J -> 1523 J in one step, and a random-scene
-      // fuzz (scripts/fuzz_worlds.py, seed 316) blew up to NaN.
+      // fuzz blew up to NaN (seed 316 of tests/python/test_fuzz_worlds.py).
       angular_velocities_[i] = (p.rotation * orientations_[i].conjugate()) * angular_velocities_[i];
     }
     positions_[i] = p.position;
