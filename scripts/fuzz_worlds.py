@@ -1,15 +1,16 @@
 """Random-world fuzzer: many random scenes and settings, each stepped for a while, checked
 for non-finite state, bodies that leave their container, and exceptions.
 
-Not a test (it runs for as long as it is told to); the named stability tests in
-tests/python/test_stability.py pin what it found. Each seed builds one scene:
+Not a test (it runs for as long as it is told to); tests/python/test_fuzz_worlds.py pins
+seeds it found failing, and named tests in tests/python/test_stability.py the defects
+behind them. Each seed builds one scene:
 
   * a container of static walls and a lid, with a ground that is a box, a plane, or a
     rolling triangle mesh (one- or two-sided), reaching under the walls;
   * 10 to 40 dynamic bodies of random shape (sphere, box, capsule, cylinder, flat or
     long hulls, a box-and-ball compound), sizes 5 cm to 1 m log-uniform, densities
     10 to 10,000 kg/m^3 (mass ratios up to ~1e7), random friction and restitution,
-    random initial linear and angular velocities (up to 20 m/s and 60 rad/s), some
+    random initial linear and angular velocities (typically up to ~20 m/s and ~60 rad/s), some
     with CCD, some with damping or a gravity scale, a few kinematic movers;
   * random world settings: dt 1/30 to 1/240, 1 to 8 substeps, 1 to 10 iterations,
     block solver, centroid rows, gyroscopic term, sleeping, threads 1 or 2, friction

@@ -236,8 +236,9 @@ struct WorldSettings {
   /// and the kinetic energy (a projection after it), so a free spinning body conserves
   /// both to rounding and shows the intermediate-axis flip, at any step (tested to one
   /// substep of 1/30 s for a 1:383 rod: the rotation is taken in parts where it turns
-  /// fast or the inertia ratio is large). Off by default, as in Box2D and Bullet (without it, w is constant in free
-  /// flight, which is what a sphere does and what games usually want).
+  /// fast or the inertia ratio is large). Off by default, as in Box2D and Bullet
+  /// (without it, w is constant in free flight, which is what a sphere does and what
+  /// games usually want).
   bool gyroscopic = false;
   BroadphaseType broadphase = BroadphaseType::kAabbTree;
   /// Threads for the step's parallel stages (the narrowphase), the caller's included.
@@ -474,8 +475,8 @@ class World {
   };
   /// Contact constraints of one pair (slots sa < sb, rows a, b) appended to out.
   void collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseOut& out) const;
-  /// Cache key of a manifold: slots (24 bits each) and the composite children (8 bits
-  /// each, wrapped).
+  /// Cache key of a manifold: the two slots and the composite children (triangle or
+  /// compound child indices, -1 for none), each kept whole (ManifoldKey).
   static ManifoldKey manifold_key(int sa, int sb, int child_a, int child_b) {
     return {(static_cast<std::uint64_t>(static_cast<std::uint32_t>(sa)) << 32) | static_cast<std::uint32_t>(sb),
             (static_cast<std::uint64_t>(static_cast<std::uint32_t>(child_a)) << 32) |
