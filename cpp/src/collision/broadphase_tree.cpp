@@ -98,7 +98,13 @@ class TraversalStack {
 
 class AabbTreeBroadphase final : public Broadphase {
  public:
-  explicit AabbTreeBroadphase(const BroadphaseSettings& s) : settings_(s) {}
+  explicit AabbTreeBroadphase(const BroadphaseSettings& s) : settings_(s) {
+    // keep_proxy_unchecked applies move_one's rule inline on the base's keep_ (the
+    // leaves' fat boxes by id).
+    keep_margin_ = s.aabb_margin;
+    keep_multiplier_ = s.displacement_multiplier;
+    keep_slack_margins_ = kShrinkMargins;
+  }
 
   BroadphaseType type() const override { return BroadphaseType::kAabbTree; }
 
@@ -189,7 +195,7 @@ class AabbTreeBroadphase final : public Broadphase {
           if (!is_live(n.proxy())) fail("leaf of a dead proxy");
           if (leaf_[static_cast<std::size_t>(n.proxy())] != i) fail("proxy -> leaf link broken");
           if (!n.box.contains(tight(n.proxy()))) fail("fat box does not contain the tight box");
-          const Aabb& mirror = fat_[static_cast<std::size_t>(n.proxy())];
+          const Aabb& mirror = keep_[static_cast<std::size_t>(n.proxy())];
           if (mirror.min != n.box.min || mirror.max != n.box.max) fail("fat box mirror differs from the leaf's box");
           continue;
         }
@@ -237,7 +243,7 @@ class AabbTreeBroadphase final : public Broadphase {
       changed_.resize(i + 1, 0);
       pending_flag_.resize(i + 1, 0);
       pending_box_.resize(i + 1);
-      fat_.resize(i + 1);
+      keep_.resize(i + 1);
     }
     const std::int32_t leaf = allocate_node();
     Node& n = nodes_[static_cast<std::size_t>(leaf)];
@@ -338,20 +344,23 @@ class AabbTreeBroadphase final : public Broadphase {
   };
   static_assert(sizeof(Node) == 64, "tree node should fill exactly one cache line");
 
-  // The fat box of a proxy: its leaf's box, mirrored by id in fat_ (set_fat keeps the
-  // two equal) so that the per-step check of every moved proxy reads memory in id order
-  // rather than the leaves scattered over the tree.
-  const Aabb& fat(ProxyId id) const { return fat_[static_cast<std::size_t>(id)]; }
+  // The fat box of a proxy: its leaf's box, mirrored by id in the base's keep_ (set_fat
+  // keeps the two equal) so that the per-step check of every moved proxy reads memory
+  // in id order rather than the leaves scattered over the tree; keep_proxy_unchecked
+  // reads it there. While a move is pending the mirror is an empty box (move_one), so
+  // that a second move before update() is tested against nothing and pended again
+  // (its new fat box is computed from the newest tight box).
+  const Aabb& fat(ProxyId id) const { return keep_[static_cast<std::size_t>(id)]; }
   void set_fat(std::int32_t leaf, const Aabb& box) {
     Node& n = node(leaf);
     n.box = box;
-    fat_[static_cast<std::size_t>(n.proxy())] = box;
+    keep_[static_cast<std::size_t>(n.proxy())] = box;
   }
 
   [[gnu::always_inline]] void move_one(ProxyId id, const Vec3& displacement) {
     const auto i = static_cast<std::size_t>(id);
     const Aabb& t = tight(id);
-    const Aabb& old_fat = fat_[i];
+    const Aabb& old_fat = keep_[i];
     const Aabb new_fat = fat_box(t, displacement);
     const Real slack = kShrinkMargins * settings_.aabb_margin +
                        settings_.displacement_multiplier * displacement.cwiseAbs().maxCoeff();
@@ -364,6 +373,7 @@ class AabbTreeBroadphase final : public Broadphase {
       pending_list_.push_back(id);
     }
     pending_box_[i] = new_fat;
+    keep_[i] = Aabb(Vec3::Constant(kInf), Vec3::Constant(-kInf));  // set_fat restores it at the flush
     mark_changed(id);
   }
 
@@ -794,7 +804,6 @@ class AabbTreeBroadphase final : public Broadphase {
   std::int64_t refits_ = 0;
   Real rebuilt_quality_ = 0;  // refit_all's ratio right after the last rebuild (0: none yet)
   std::vector<std::uint8_t> pending_flag_;  // by proxy id: moved out of its fat box, not yet placed
-  std::vector<Aabb> fat_;                   // by proxy id: its leaf's box (fat())
   std::vector<Aabb> pending_box_;           // by proxy id: its new fat box while pending
   std::vector<ProxyId> pending_list_;       // ids flagged (possibly destroyed since: flag cleared)
   /// A leaf as rebuild sorts it: its fat box's min + max (twice the centre) and node.

@@ -533,6 +533,66 @@ TEST(AabbTree, ReinsertsOnlyWhenLeavingFatBox) {
   bp->validate();
 }
 
+// keep_proxy_unchecked (the world's per-step fast path) decides as move_proxy would:
+// it keeps exactly the moves that leave the fat box as it is, declines the others
+// without changing anything, declines a second move of a proxy whose first is still
+// pending, and never keeps a non-finite box. Brute force has no fat boxes: it always
+// declines. Random moves of every size against a second tree moved by move_proxy alone:
+// the same pairs, the same reinsertions, every step.
+TEST(AabbTree, KeepDecidesAsMoveWould) {
+  Scene scene(91, 10.0, Vec3::Zero());
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<Real> u(-1, 1);
+  auto kept = make_broadphase(BroadphaseType::kAabbTree);
+  auto moved = make_broadphase(BroadphaseType::kAabbTree);
+  auto brute = make_broadphase(BroadphaseType::kBruteForce);
+  std::vector<Aabb> boxes;
+  for (int i = 0; i < 300; ++i) {
+    boxes.push_back(scene.random_body().box());
+    kept->create_proxy(boxes.back());
+    moved->create_proxy(boxes.back());
+    brute->create_proxy(boxes.back());
+  }
+  std::vector<ProxyPair> a, b;
+  int keeps = 0, declines = 0;
+  for (int step = 0; step < 60; ++step) {
+    for (int i = 0; i < 300; ++i) {
+      // Small moves mostly (kept), now and then one out of the fat box or a velocity
+      // change that makes it too loose (declined).
+      const Real size = (i + step) % 7 == 0 ? 0.5 : 0.01;
+      const Vec3 d(size * u(rng), size * u(rng), size * u(rng));
+      const Vec3 disp = (i % 3 == 0) ? Vec3(0.2 * u(rng), 0.2 * u(rng), 0) : Vec3::Zero();
+      boxes[i] = Aabb(boxes[i].min + d, boxes[i].max + d);
+      EXPECT_FALSE(brute->keep_proxy_unchecked(i, boxes[i], disp));
+      const Aabb before = kept->aabb(i);
+      if (kept->keep_proxy_unchecked(i, boxes[i], disp)) {
+        ++keeps;
+        EXPECT_EQ(kept->aabb(i).min, boxes[i].min);
+      } else {
+        ++declines;
+        EXPECT_EQ(kept->aabb(i).min, before.min);  // declined: unchanged
+        kept->move_proxy(i, boxes[i], disp);
+        // Pending now: a second move before update() is never kept.
+        EXPECT_FALSE(kept->keep_proxy_unchecked(i, boxes[i], disp));
+      }
+      moved->move_proxy(i, boxes[i], disp);
+      brute->move_proxy(i, boxes[i], disp);
+    }
+    kept->query_pairs(a);
+    moved->query_pairs(b);
+    ASSERT_EQ(a, b) << "step " << step;
+    brute->query_pairs(b);
+    ASSERT_EQ(a, b) << "step " << step;
+    EXPECT_EQ(kept->stats().reinsertions + kept->stats().refits, moved->stats().reinsertions + moved->stats().refits);
+    kept->validate();
+  }
+  EXPECT_GT(keeps, 1000);
+  EXPECT_GT(declines, 100);
+  const Real nan = std::numeric_limits<Real>::quiet_NaN();
+  EXPECT_FALSE(kept->keep_proxy_unchecked(0, Aabb(Vec3::Constant(nan), Vec3::Constant(nan)), Vec3::Zero()));
+  EXPECT_FALSE(kept->keep_proxy_unchecked(0, kept->aabb(0), Vec3(nan, 0, 0)));
+}
+
 // A tree and the brute-force reference holding the same `n` random boxes of `scene`.
 struct TreeAndReference {
   std::unique_ptr<Broadphase> tree, brute;

@@ -170,6 +170,34 @@ class Broadphase {
     on_move_batch(ids, displacements, count);
   }
 
+  /// The per-step fast path of a move: if the algorithm keeps a fat box for `id` (the
+  /// tree does; brute force and sweep and prune do not) and move_proxy_unchecked(id,
+  /// box, displacement) would leave that fat box as it is (`box` inside it, and it not
+  /// grown too loose for `box`: the tree's rule, see broadphase_tree.cpp), sets the
+  /// tight box and returns true; nothing else changes, so update() has no work. Else
+  /// returns false and changes nothing: the caller moves the proxy. The same outcome
+  /// as move_proxy_unchecked, decided inline on id-ordered arrays without a virtual
+  /// call (the world tries it for every awake body every step: 10,000 falling spheres
+  /// spent ~14 ns a body in the batched moves, the most of it in their bookkeeping).
+  /// Preconditions as move_proxy_unchecked, except that a non-finite box is allowed
+  /// (NaN fails every comparison: false).
+  [[gnu::always_inline]] bool keep_proxy_unchecked(ProxyId id, const Aabb& box, const Vec3& displacement) {
+    if (keep_.empty()) return false;
+    const auto i = static_cast<std::size_t>(id);
+    const Aabb& f = keep_[i];
+    // The fat box the move would compute: box grown by the margin, stretched ahead of
+    // the displacement (times the multiplier); it is kept unless the fat box exceeds
+    // that grown by the slack (keep_slack_margins_ margins plus the stretch's size).
+    const Vec3 d = keep_multiplier_ * displacement;
+    const Real slack = keep_slack_margins_ * keep_margin_ + keep_multiplier_ * displacement.cwiseAbs().maxCoeff();
+    const Vec3 lo = ((box.min.array() - keep_margin_).matrix() + d.cwiseMin(Vec3::Zero())).array() - slack;
+    const Vec3 hi = ((box.max.array() + keep_margin_).matrix() + d.cwiseMax(Vec3::Zero())).array() + slack;
+    const bool keep = (f.min.array() <= box.min.array()).all() & (box.max.array() <= f.max.array()).all() &
+                      (lo.array() <= f.min.array()).all() & (f.max.array() <= hi.array()).all();
+    if (keep) tight_[i] = box;
+    return keep;
+  }
+
   /// Finishes incremental work after a batch of create/destroy/move calls (re-sorting,
   /// candidate-pair update). query_pairs calls it itself when needed.
   void update();
@@ -238,6 +266,14 @@ class Broadphase {
   virtual void on_query_pairs(std::vector<ProxyPair>& out) = 0;
 
   const Aabb& tight(ProxyId id) const { return tight_[static_cast<std::size_t>(id)]; }
+
+  /// For an algorithm with fat boxes: by id, the fat box keep_proxy_unchecked tests
+  /// against (an empty box, min > max, while a move is pending: every test fails), and
+  /// the rule's constants. Left empty, keep_proxy_unchecked always declines.
+  std::vector<Aabb> keep_;
+  Real keep_margin_ = 0;
+  Real keep_multiplier_ = 0;
+  Real keep_slack_margins_ = 0;
 
  private:
   void require_live(const char* what, ProxyId id) const {

@@ -515,6 +515,7 @@ class World {
   /// h v_move (s.v for a body in contact, the substep's mean velocity for a free one).
   void integrate_position(int i, BodyState& s, std::uint8_t f, Real h, const Vec3& v_move);
   void run_step();
+  long long update_broadphase(bool ccd);  // the stage of that name; returns the count moved
   /// The ccd stage (world.h, WorldSettings::enable_ccd); returns the bodies swept.
   int continuous_step();
   /// The ccd stage's last part: overlaps deeper than a CCD body's allowance that the
