@@ -8,7 +8,7 @@
 //    (integrate_rotation, as the world does; it leaves the orientation of a body that
 //    does not turn, as these spheres, unchanged: before it did that, the loop's
 //    quaternion normalisations took 210 of its 313 us, the world's step was 586 us
-//    where it is ~342 now, and the ratio below was ~1.9). The world also does
+//    where it is ~270-290 now, and the ratio below was ~1.9). The world also does
 //    everything a step does when nothing touches (broadphase proxies moved, an empty
 //    pair query, no contacts, no solver work; the sleep check passes over bodies in
 //    free flight, see World::update_sleep), and that overhead is what the ratio shows.
