@@ -320,13 +320,17 @@ class AabbTreeBroadphase final : public Broadphase {
   }
 
   void on_query_pairs(std::vector<ProxyPair>& out) override {
-    // Aabb::overlaps without its early outs: all six comparisons, then one branch
-    // (most candidates of a moving scene fail some test, in no predictable order).
+    // Aabb::overlaps with one branch: the boxes' intersection, hi - lo, is not negative
+    // on any axis (most candidates of a moving scene fail some axis, in no predictable
+    // order; the six comparisons, written with `&`, were still compiled to a branch
+    // each: 10,000 falling spheres, 9,500 candidates, 34 us). The tight boxes are
+    // finite (move_proxy's precondition), and for finite x, y, x - y >= 0 exactly when
+    // x >= y (a difference of distinct doubles is never rounded to zero).
     for (const ProxyPair& p : candidates_) {
       const Aabb& a = tight(p.first);
       const Aabb& b = tight(p.second);
-      const bool overlap = (a.min.array() <= b.max.array()).all() & (b.min.array() <= a.max.array()).all();
-      if (overlap) out.push_back(p);
+      const Vec3 gap = a.max.cwiseMin(b.max) - a.min.cwiseMax(b.min);
+      if (std::min(std::min(gap.x(), gap.y()), gap.z()) >= 0) out.push_back(p);
     }
   }
 
