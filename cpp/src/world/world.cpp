@@ -484,6 +484,7 @@ void World::wake_island(int island) {
     sleep_time_[i] = 0;
     sleep_island_[i] = -1;
   }
+  cache_woke_ = true;  // its cached pairs may have gone stale (store_impulses)
   islands_[island].clear();
   free_islands_.push_back(island);
 }
@@ -1651,9 +1652,26 @@ void World::run_step() {
                                        c.points[j].tangent_impulse[1] * c.tangent2};
     }
     // Stale entries (pairs that stopped touching) dropped; none when every entry was
-    // stamped, the usual case for a resting pile, which then skips the walk.
-    if (cache_.size() != fresh)
-      cache_.erase_if([stamp](const ManifoldKey&, const CachedManifold& cm) { return cm.stamp != stamp; });
+    // stamped or kept for a sleeping body at the last walk (and no island woke since),
+    // the usual case for a resting pile, which then skips the walk. A pair with a
+    // sleeping body is not collided while it sleeps, and keeps its entry: on waking,
+    // its contacts warm start, and a mesh's triangles keep the side they were touched
+    // from (touched_before). Dropped, a two-sided mesh's history was lost in every
+    // sleep: a 1.8 kg hull resting half through a two-sided ground woke with no
+    // history, one triangle took the far side and pushed it out below (fuzz scene).
+    if (cache_.size() != fresh + cache_kept_asleep_ || cache_woke_) {
+      std::size_t kept = 0;
+      cache_.erase_if([&](const ManifoldKey& key, const CachedManifold& cm) {
+        if (cm.stamp == stamp) return false;
+        const int a = slots_[static_cast<std::size_t>(key.pair >> 32)].index;
+        const int b = slots_[static_cast<std::size_t>(key.pair & 0xFFFFFFFFu)].index;
+        const bool asleep = sleep_island_[a] >= 0 || sleep_island_[b] >= 0;
+        kept += asleep;
+        return !asleep;
+      });
+      cache_kept_asleep_ = kept;
+      cache_woke_ = false;
+    }
   }
   // ---- ccd ----
   {

@@ -577,6 +577,47 @@ TEST(CollideMesh, TwoSidedKeepsTheSideATriangleWasTouchedFrom) {
   }
 }
 
+TEST(CollideMesh, TwoSidedKeepsALongBoxApartFromATiltedTriangleOnItsSide) {
+  // Found by scripts/fuzz_worlds.py (seed 62, two-sided ground): a 1.85 m long box
+  // (566 kg) landing spinning at 10 rad/s beside a wall, 6 cm above the flank of a
+  // ridge of the rolling ground (a 13 x 13 grid of 2 m cells, height 0.41 sin(x + z)).
+  // Its nearest triangle's normal came from an internal edge and was turned into the
+  // face normal, whose side was chosen by how much of the box lies on either side of
+  // the triangle's plane taken whole; that tilted plane cut through the box beyond the
+  // ridge, more of it lay below, and the contact pushed it down, 0.48 m "deep" along
+  // the back normal: it sank through the ground over the next 800 steps. Apart from a
+  // triangle, its nearest point is on the side GJK's normal points to; where the larger
+  // part says otherwise the triangle gives no contact. Every contact must push it up,
+  // from no deeper than touching.
+  const Real amp = 0.4094776978478838;
+  std::vector<Vec3> v;
+  Tris t;
+  for (int i = 0; i < 13; ++i)
+    for (int j = 0; j < 13; ++j) {
+      const Real x = -12 + 2 * i, z = -12 + 2 * j;
+      v.emplace_back(x, amp * std::sin(x + z), z);
+    }
+  for (int i = 0; i < 12; ++i)
+    for (int j = 0; j < 12; ++j) {
+      const int a = 13 * i + j;
+      t.push_back({a, a + 1, a + 13});
+      t.push_back({a + 1, a + 14, a + 13});
+    }
+  const TriangleMesh ground(v, t);
+  const Box box(Vec3(0.1488016036057695, 0.08292954131472187, 0.9238581003428556));
+  const Pose pose(Vec3(4.6255246451493059, 0.46495089580347593, 9.8861336727300024),
+                  Quat(-0.5868834614155285, 0.52332090365107431, 0.47662022912885638, -0.39311091526935149));
+  const std::vector<Manifold> out = collide(ground, box, pose, true, 0.1547);
+  ASSERT_FALSE(out.empty());
+  for (const Manifold& m : out) {
+    EXPECT_GT(m.normal.y(), 0.5) << "triangle " << m.child_a;
+    for (int k = 0; k < m.count; ++k) {
+      EXPECT_LE(m.points[k].depth, 0.0);
+      EXPECT_GE(m.points[k].depth, -0.1547);
+    }
+  }
+}
+
 TEST(CollideMesh, OneSidedCubeFromInside) {
   // A ball inside a one-sided (outward-wound) cube near its +X wall overlaps it: pushed
   // out through the wall (+X) by the depth of its innermost point (0.4 m), not back

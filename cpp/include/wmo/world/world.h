@@ -669,6 +669,8 @@ class World {
   bool awake_timers_zero_ = true;
 
   std::vector<Slot> slots_;
+  std::size_t cache_kept_asleep_ = 0;  // cache entries kept for sleeping bodies at the last walk
+  bool cache_woke_ = false;            // an island woke since that walk
   std::vector<std::int32_t> free_slots_;
 
   // Step scratch and contact cache.
