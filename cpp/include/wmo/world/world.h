@@ -197,6 +197,10 @@ struct WorldSettings {
   ///     at the manifold's centroid and the potential energy the push gains taken
   ///     out of the kinetic energy, in rounds over the contacts of the bodies pushed
   ///     (world.cpp, project_ccd_overlaps). A resting pair's sag stays the solver's.
+  ///     A body is never pushed into static geometry it touches: its partner takes
+  ///     the push (or, pinned too, the pair is left to the solver); a round ends
+  ///     with the pairs with static geometry; and a push longer than the CCD
+  ///     threshold is swept against static geometry and stopped there.
   ///     boxes3000 with CCD on every box: 0.39-0.52 m -> 0.076-0.092 m deepest
   ///     overlap (six runs, positions perturbed by 1e-7 m).
   ///  A fast non-CCD dynamic body can still pass through a slow CCD body: CCD belongs
