@@ -2021,6 +2021,11 @@ int World::project_ccd_overlaps() {
   // 1.31 ms a step at 16 rounds, 1.32 at 64, 1.74 at 1000; with this rule at 64, 1.35
   // ms, benchmarks/ccd/run.py).
   constexpr Real kFastCap = 1.5;
+  // A pair within this many allowances of its target is not pushed: once pushed to
+  // the cap, a pair's fresh depth is the cap to round-off, and was pushed by 1e-19 m
+  // again in every round to the round cap (a thin hull resting on a mesh ground under
+  // a box: 64 collisions a step for nothing).
+  constexpr Real kMinPush = 0.01;
   // How far each body's points moved over the step: its centre of mass, and its turn
   // times its bounding radius (states_: bodies in contact have their step's motion).
   // The angle, 2 asin(|vec(dq)|) for dq with w >= 0, is bounded without trigonometry:
@@ -2177,6 +2182,7 @@ int World::project_ccd_overlaps() {
       if (!deepened && !(cp.depth > cap && (moving(a) || moving(b)))) continue;
       const Real target = deepened ? std::max(Real(0.5) * allowance, std::min(before, cap)) : cap;
       const Real excess = cp.depth - target;
+      if (!(excess > kMinPush * allowance)) continue;
       const Real share_a = wa / (wa + wb), share_b = wb / (wa + wb);
       Vec3 da = -share_a * excess * deepest->normal, db = share_b * excess * deepest->normal;
       const bool pinned_a = share_a > 0 && pinned(a, da), pinned_b = share_b > 0 && pinned(b, db);
