@@ -33,8 +33,9 @@ def test_a_random_world_that_found_a_defect_now_holds(seed):
     # scenes: seed 316 went non-finite (a thin rod spinning with the gyroscopic term,
     # put back by CCD with the wrong angular velocity); the others lost a light body
     # (a 0.7-195 g hull, a 72 g capsule) through the one-sided mesh ground, pressed
-    # wholly behind it within one step. Of seeds 1-800, 10 failed then and 3 now (the
-    # xfails below). Now none of these loses a body or goes non-finite.
+    # wholly behind it within one step. Of seeds 1-800, 10 failed then, 3 with commit
+    # 89f82de (the crushed bodies below) and none since. Now none of these loses a body
+    # or goes non-finite.
     _holds(seed)
 
 

@@ -341,3 +341,17 @@ def test_a_compound_is_drawn_as_its_children_in_place():
     assert np.allclose(np.abs(box[:, 2]), 0.1)
     np.testing.assert_allclose(np.hypot(box[:, 0], box[:, 1]).max(), math.hypot(0.5, 0.1), rtol=1e-12)
     assert _bounding_radius(spec) == pytest.approx(1.25)
+
+
+def test_a_one_sided_mesh_is_drawn_from_its_front_only():
+    # A one-sided mesh collides only from the side its triangles face: drawn double-
+    # sided, a terrain seen from below looked solid where bodies pass through it.
+    import wmo
+    from wmo.remote.scene import shape_to_spec
+    from wmo.remote.viewer import _side
+
+    v = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
+    assert _side(shape_to_spec(wmo.TriangleMesh(v, [[0, 2, 1]], one_sided=True))) == "front"
+    assert _side(shape_to_spec(wmo.TriangleMesh(v, [[0, 2, 1]]))) == "double"
+    assert _side(shape_to_spec(wmo.Plane((0, 1, 0), 0))) == "double"
+    assert _side(BOX) == "front"

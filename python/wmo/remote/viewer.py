@@ -102,6 +102,17 @@ def _z_to_y(vertices: np.ndarray) -> np.ndarray:
     return np.stack([v[:, 0], v[:, 2], -v[:, 1]], axis=1)
 
 
+def _side(spec: dict) -> str:
+    """Which faces of a shape's mesh the browser draws: a two-sided triangle mesh (a
+    sheet, solid from both sides) and a plane's slab both sides; a one-sided mesh only
+    its front, the side that collides, so that a terrain seen from below, where bodies
+    pass through it, is not drawn as if solid; closed convex meshes their front."""
+    t = spec.get("type")
+    if t == "triangle_mesh":
+        return "front" if spec.get("one_sided", False) else "double"
+    return "double" if t == "plane" else "front"
+
+
 def _mesh(spec: dict) -> tuple[np.ndarray, np.ndarray, bool]:
     """(vertices (V, 3) in the body frame, faces (F, 3), flat shading) of a shape spec;
     box, sphere and cylinder are unit meshes that _scale stretches."""
@@ -497,7 +508,7 @@ class Viewer:
             batched_scales=b.scales, batched_colors=COLOURS[b.key[1]],
             # LOD off: these meshes are small, and instance indices of clicks must be ours.
             lod="off", flat_shading=flat,
-            side="double" if spec["type"] in ("triangle_mesh", "plane") else "front")
+            side=_side(spec))
         handle = b.handle
 
         @handle.on_click
