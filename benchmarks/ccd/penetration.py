@@ -8,7 +8,7 @@ poses) and the wall time of the steps. The scene is chaotic: a change that shoul
 matter moves these maxima by a centimetre or more. Settings are World keywords:
 
     .venv/bin/python benchmarks/ccd/penetration.py                       # defaults: 0.828 m
-    .venv/bin/python benchmarks/ccd/penetration.py --ccd all             # 0.076 m (overlap
+    .venv/bin/python benchmarks/ccd/penetration.py --ccd all             # 0.082 m (overlap
         # projection; 0.41 m with the shock pass alone)
     .venv/bin/python benchmarks/ccd/penetration.py --set iterations=10   # 0.715 m
     .venv/bin/python benchmarks/ccd/penetration.py --split 4 --set substeps=1            # 0.989 m
