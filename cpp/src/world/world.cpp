@@ -2249,21 +2249,13 @@ int World::project_ccd_overlaps() {
     const Pose end(positions_[i], orientations_[i]);
     Aabb box = shapes_[i]->world_aabb(mi.start);
     box.grow(shapes_[i]->world_aabb(end));
-    const Real budget = 0.25 * ccd_allowance(i);
+    const Real allowance = ccd_allowance(i);
     Real t_hit = 1;
     broadphase_->query_aabb(box, [&](ProxyId id) {
       const int j = slots_[static_cast<int>(broadphase_->user_data(id))].index;
       if (j == i || kinds_[j] != BodyKind::kStatic) return true;
       if (has_filters_ && !collides(slot_of_[i], slot_of_[j])) return true;
-      const Motion mj{Pose(positions_[j], orientations_[j])};
-      ToiSettings st;
-      st.tolerance = 0.5 * budget;
-      st.target_distance = -2 * budget;
-      ToiResult r = time_of_impact(*shapes_[i], mi, *shapes_[j], mj, t_hit, st);
-      if (r.hit && r.time == 0 && r.status == QueryStatus::kOk) {
-        st.target_distance = r.distance - budget;  // overlapping already: may deepen by the budget
-        r = time_of_impact(*shapes_[i], mi, *shapes_[j], mj, t_hit, st);
-      }
+      const ToiResult r = sweep_to_allowance(i, mi, j, Motion{Pose(positions_[j], orientations_[j])}, t_hit, allowance);
       if (r.hit && r.status != QueryStatus::kUnsupported && r.time < t_hit) t_hit = r.time;
       return true;
     });
@@ -2279,6 +2271,26 @@ int World::project_ccd_overlaps() {
     if (i < static_cast<int>(states_.size())) states_[i].dp += d;
   }
   return pushes;
+}
+
+// The ccd stage's sweep rule (continuous_step's sweeps, project_ccd_overlaps' long
+// pushes): body a moving by ma against body b moving by mb over `duration` may make no
+// overlap deeper than half its allowance, nor deepen one it starts with by more than a
+// quarter of it; returns the first time it would (hit false if never).
+ToiResult World::sweep_to_allowance(int a, const Motion& ma, int b, const Motion& mb, Real duration,
+                                    Real allowance) const {
+  const Real budget = 0.25 * allowance;
+  ToiSettings st;
+  st.tolerance = 0.5 * budget;
+  st.target_distance = -2 * budget;
+  ToiResult r = time_of_impact(*shapes_[a], ma, *shapes_[b], mb, duration, st);
+  if (r.hit && r.time == 0 && r.status == QueryStatus::kOk) {
+    // Already deeper than that at the start (r.distance, the deepest overlap): it may
+    // deepen by the budget.
+    st.target_distance = r.distance - budget;
+    r = time_of_impact(*shapes_[a], ma, *shapes_[b], mb, duration, st);
+  }
+  return r;
 }
 
 int World::continuous_step() {
@@ -2357,19 +2369,8 @@ int World::continuous_step() {
   };
   auto sweep_pair = [&](const Sweep& sa, int b, const Motion& mb, Real reach_b, Real allowance) {
     PairHit h;
-    const Real budget = 0.25 * allowance;
-    if (sa.reach + reach_b <= budget) return h;  // cannot get that much closer in one step
-    const int a = sa.body;
-    ToiSettings st;
-    st.tolerance = 0.5 * budget;
-    st.target_distance = -2 * budget;
-    ToiResult r = time_of_impact(*shapes_[a], sa.motion, *shapes_[b], mb, dt, st);
-    if (r.hit && r.time == 0 && r.status == QueryStatus::kOk) {
-      // Already deeper than that at the start (r.distance, the deepest overlap): it may
-      // deepen by the budget.
-      st.target_distance = r.distance - budget;
-      r = time_of_impact(*shapes_[a], sa.motion, *shapes_[b], mb, dt, st);
-    }
+    if (sa.reach + reach_b <= 0.25 * allowance) return h;  // cannot get that much closer in one step
+    const ToiResult r = sweep_to_allowance(sa.body, sa.motion, b, mb, dt, allowance);
     if (!r.hit || r.status == QueryStatus::kUnsupported) return h;
     h.hit = true;
     h.time = r.time;

@@ -526,6 +526,10 @@ class World {
   /// solve left with the bodies it had contacts with, pushed apart (world.cpp);
   /// returns how many.
   int project_ccd_overlaps();
+  /// time_of_impact of body a (motion ma) against body b (motion mb) over `duration`
+  /// (s), stopping where an overlap would pass half of `allowance` (m), or deepen one
+  /// the pair starts with by a quarter of it (world.cpp).
+  ToiResult sweep_to_allowance(int a, const Motion& ma, int b, const Motion& mb, Real duration, Real allowance) const;
   /// An impulse at a world point (m) along a unit normal (from a to b) that stops the
   /// two bodies' approach there (with the pair's restitution above the threshold if
   /// `bounce`); see world.cpp.
