@@ -14,6 +14,7 @@
 #include <cmath>
 #include <memory>
 #include <optional>
+#include <utility>
 
 #include "common.h"
 #include "wmo/world/world.h"
@@ -116,24 +117,24 @@ the world's state arrays (it changes when another body is removed).
           "Inertia tensor about the centre of mass (kg m^2, shape axes), (3, 3); zeros for "
           "static and kinematic bodies.")
       .def_property(
-          "position", [](const PyBody& b) { return to_array(world_of(b).positions()[world_of(b).index_of(b.id)]); },
+          "position", [](const PyBody& b) { return to_array(std::as_const(world_of(b)).positions()[world_of(b).index_of(b.id)]); },
           [](const PyBody& b, py::object v) { world_of(b).set_position(b.id, to_vec3(v, "position")); },
           "Shape-frame origin (m, world); a copy. Setting it validates the value.")
       .def_property(
           "orientation",
-          [](const PyBody& b) { return to_array(world_of(b).orientations()[world_of(b).index_of(b.id)]); },
+          [](const PyBody& b) { return to_array(std::as_const(world_of(b)).orientations()[world_of(b).index_of(b.id)]); },
           [](const PyBody& b, py::object q) { world_of(b).set_orientation(b.id, to_quat_xyzw(q, "orientation")); },
           "Unit quaternion (x, y, z, w); a copy. Setting it validates the value.")
       .def_property(
           "linear_velocity",
-          [](const PyBody& b) { return to_array(world_of(b).linear_velocities()[world_of(b).index_of(b.id)]); },
+          [](const PyBody& b) { return to_array(std::as_const(world_of(b)).linear_velocities()[world_of(b).index_of(b.id)]); },
           [](const PyBody& b, py::object v) {
             world_of(b).set_linear_velocity(b.id, to_vec3(v, "linear_velocity"));
           },
           "Centre-of-mass velocity (m/s, world); a copy. Setting it validates the value.")
       .def_property(
           "angular_velocity",
-          [](const PyBody& b) { return to_array(world_of(b).angular_velocities()[world_of(b).index_of(b.id)]); },
+          [](const PyBody& b) { return to_array(std::as_const(world_of(b)).angular_velocities()[world_of(b).index_of(b.id)]); },
           [](const PyBody& b, py::object w) {
             world_of(b).set_angular_velocity(b.id, to_vec3(w, "angular_velocity"));
           },
@@ -442,18 +443,20 @@ field; the world is unchanged. Existing state views may detach (see World).
            "Reserves storage for n bodies so that adding up to n keeps state views attached.")
       .def(
           "step", [](World& w, int n) { w.step(n); }, py::arg("n") = 1, py::call_guard<py::gil_scoped_release>(),
-          "Advances n steps of dt (the GIL is released). Checks the state arrays first: a "
-          "non-finite value or a non-unit quaternion raises ValueError and nothing moves.")
-      .def_property_readonly("positions", [](World& w) { return state_view<Vec3, 3>(w.positions(), w.body_count()); },
+          "Advances n steps of dt (the GIL is released). Checks the state arrays first "
+          "wherever they may have been written (while a view of them is alive, and at the "
+          "first step after the last is released): a non-finite value or a non-unit "
+          "quaternion raises ValueError and nothing moves.")
+      .def_property_readonly("positions", [](World& w) { return state_view<Vec3, 3>(w.shared_positions(), w.body_count()); },
                              "(N, 3) writable view: shape-frame origins (m).")
       .def_property_readonly("orientations",
-                             [](World& w) { return state_view<Quat, 4>(w.orientations(), w.body_count()); },
+                             [](World& w) { return state_view<Quat, 4>(w.shared_orientations(), w.body_count()); },
                              "(N, 4) writable view: unit quaternions (x, y, z, w).")
       .def_property_readonly(
-          "linear_velocities", [](World& w) { return state_view<Vec3, 3>(w.linear_velocities(), w.body_count()); },
+          "linear_velocities", [](World& w) { return state_view<Vec3, 3>(w.shared_linear_velocities(), w.body_count()); },
           "(N, 3) writable view: centre-of-mass velocities (m/s).")
       .def_property_readonly(
-          "angular_velocities", [](World& w) { return state_view<Vec3, 3>(w.angular_velocities(), w.body_count()); },
+          "angular_velocities", [](World& w) { return state_view<Vec3, 3>(w.shared_angular_velocities(), w.body_count()); },
           "(N, 3) writable view: angular velocities (rad/s, world frame).")
       .def_property_readonly("body_count", &World::body_count)
       .def("__len__", &World::body_count)

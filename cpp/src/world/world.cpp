@@ -665,7 +665,11 @@ void World::validate_state() {
 void World::step(int n) {
   if (n < 0) throw InvalidArgument("n must be >= 0, got " + std::to_string(n));
   if (n == 0) return;
-  validate_state();
+  // The state check only where the user may have written (the State accessors, world.h).
+  // A view released after the last step may have written before it was: one more check.
+  const bool held = state_views_held();
+  if (state_writable_ || state_shared_ || held) validate_state();
+  state_shared_ = held;
   for (int k = 0; k < n; ++k) run_step();
 }
 
@@ -676,12 +680,20 @@ void World::integrate_velocities(Real h) {
 
 void World::integrate_plain_run(int begin, int end, Real h, int substeps) {
   if (end > begin) plain_runs_.emplace_back(begin, end);
-  // Local copies of what the loop reads: through `this`, h, the gravity and the
-  // arrays' storage were reloaded after every store to a position (a double that might
-  // alias them). Chunks of kChunk bodies take all their substeps while their state
-  // (104 bytes a body) stays in the L1 cache; the bodies are independent, so the order
-  // changes no bit. The centre of mass moves with the substep's mean velocity, as in
-  // integrate_position (exact under gravity).
+  // Chunks of kChunk bodies take all their substeps while their state (104 bytes a
+  // body) stays in the L1 cache; the bodies are independent, so the order changes no
+  // bit. Within a chunk the translation runs over the positions and velocities as flat
+  // arrays of doubles (3 per body, the rows' layout), each coordinate independent:
+  //   v1 = v0 + dv,  x += (h / 2) (v0 + v1),  dv = (h gravity_scale) g,
+  // the centre of mass moving with the substep's mean velocity, as in
+  // integrate_position (exact under gravity). Written per Vec3 row, the compiler made
+  // scalar code of it (a 3-vector fills no SIMD register evenly); flat, the loop is
+  // vectorised. Same operations on every coordinate, so the same bits. The rotation,
+  // independent of the translation, follows body by body (integrate_rotation's
+  // substeps; nothing for a body that does not turn, checked once a step rather than
+  // every substep). 10,000 free-falling spheres: the solve stage ~114 -> ~69 us (median).
+  // Locals rather than members: through `this` the compiler reloaded h, the gravity
+  // and the arrays' storage after every store to a double that might alias them.
   constexpr int kChunk = 128;
   const Vec3 g = settings_.gravity;
   const Real half_h = 0.5 * h;
@@ -690,16 +702,33 @@ void World::integrate_plain_run(int begin, int end, Real h, int substeps) {
   Vec3* const vel = linear_velocities_.data();
   const Vec3* const ang = angular_velocities_.data();
   const Real* const scale = gravity_scale_.data();
+  alignas(64) std::array<Real, 3 * kChunk> dv;
   for (int b = begin; b < end; b += kChunk) {
     const int e = std::min(end, b + kChunk);
+    const int m = 3 * (e - b);
+    for (int i = b; i < e; ++i) {
+      const Vec3 d = (h * scale[i]) * g;
+      dv[3 * (i - b)] = d.x();
+      dv[3 * (i - b) + 1] = d.y();
+      dv[3 * (i - b) + 2] = d.z();
+    }
+    Real* __restrict const x = pos[b].data();
+    Real* __restrict const v = vel[b].data();
+    const Real* __restrict const d = dv.data();
     for (int sub = 0; sub < substeps; ++sub)
-      for (int i = b; i < e; ++i) {
-        const Vec3 v0 = vel[i];
-        const Vec3 v1 = v0 + (h * scale[i]) * g;
-        vel[i] = v1;
-        pos[i] += half_h * (v0 + v1);
-        ori[i] = integrate_rotation(ori[i], ang[i], h);
+      for (int j = 0; j < m; ++j) {
+        const Real v0 = v[j];
+        const Real v1 = v0 + d[j];
+        v[j] = v1;
+        x[j] += half_h * (v0 + v1);
       }
+    for (int i = b; i < e; ++i) {
+      const Vec3 w = ang[i];
+      if ((w.x() == 0) & (w.y() == 0) & (w.z() == 0)) continue;
+      Quat q = ori[i];
+      for (int sub = 0; sub < substeps; ++sub) q = integrate_rotation(q, w, h);
+      ori[i] = q;
+    }
   }
 }
 

@@ -103,6 +103,29 @@ TEST(World, BadInputRaisesAndLeavesTheWorldUnchanged) {
   EXPECT_THROW(World{s}, InvalidArgument);
 }
 
+// step() checks the state only where the user may have written it (world.h, State):
+// after any call of a writable accessor it checks at every step, since the reference
+// may be kept: a write through a reference taken before several steps is still caught,
+// with the world left as it was; a sleeping body written to through it wakes.
+TEST(World, WritesThroughAKeptWritableReferenceAreCheckedAtEveryStep) {
+  World w = ground_world();
+  const auto [a, b] = sleeping_two_box_stack(w);
+  SharedArray<Vec3>& v = w.linear_velocities();  // kept across steps
+  w.step(3);
+  const int i = w.index_of(b);
+  v[i] = Vec3(0, NAN, 0);
+  const Vec3 p = std::as_const(w).positions()[i];
+  const long long count = w.step_count();
+  EXPECT_THROW(w.step(), InvalidArgument);
+  EXPECT_EQ(w.step_count(), count);
+  EXPECT_EQ(std::as_const(w).positions()[i], p);
+  v[i] = Vec3(0, 2, 0);  // asleep until now: the write wakes its island
+  w.step();
+  EXPECT_GT(std::as_const(w).positions()[i].y(), p.y());
+  EXPECT_GT(w.awake_dynamic_count(), 0);
+  (void)a;
+}
+
 // A box dropped on the ground comes to rest on it: resting penetration below 1 mm
 // (the soft contact holds a 1 m box under gravity with a sub-millimetre spring
 // deflection: g / (2 pi 60)^2 = 0.07 mm at the default 60 Hz of a contact with a static
