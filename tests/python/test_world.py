@@ -237,6 +237,62 @@ def test_skipping_the_state_check_changes_no_bit(scene):
     assert all(v.base is not None for v in held)
 
 
+def profile_totals(world):
+    return {k: (v["total_seconds"], v["total_count"], v["runs"]) for k, v in world.profile.items()}
+
+
+@pytest.mark.parametrize("array", ["positions", "orientations", "linear_velocities", "angular_velocities"])
+@pytest.mark.parametrize("row", ["static", "awake", "asleep"])
+def test_a_bad_value_in_a_held_view_raises_and_nothing_moves(array, row):
+    # With a view held, the first step of each step() checks the state (in the
+    # broadphase stage, on the values it reads): a non-finite value, in any array and
+    # any kind of row, raises naming both; state, step count and profile as they were.
+    world, b = ground_and_box()
+    top = world.add_body(wmo.Box((1, 1, 1)), position=(0, 3, 0), mass=2.0)
+    world.step(120 if row == "asleep" else 10)
+    assert top.sleeping == (row == "asleep")
+    i = {"static": 0, "awake": top.index, "asleep": top.index}[row]
+    view = getattr(world, array)
+    view[i, 1] = np.nan
+    before, count, totals = snapshot(world), world.step_count, profile_totals(world)
+    with pytest.raises(ValueError, match=rf"{array}\[{i}\]"):
+        world.step(3)
+    assert world.step_count == count and profile_totals(world) == totals
+    for x, y in zip(before, snapshot(world)):
+        np.testing.assert_array_equal(x, y)
+
+
+def test_quaternions_written_into_a_held_view_are_normalised_or_refused():
+    world, b = ground_and_box()
+    world.step(5)
+    view = world.orientations
+    view[b.index] = (0, 0, 0, 1 + 5e-6)  # within kUnitQuatTolerance (1e-5): normalised
+    world.step()
+    assert abs(np.linalg.norm(view[b.index]) - 1) < 1e-15
+    view[b.index] = (0, 0, 0, 1 + 5e-5)  # beyond it: refused
+    with pytest.raises(ValueError, match=r"orientations\[1\].*unit quaternion"):
+        world.step()
+
+
+def test_a_sleeping_body_moved_through_a_held_view_wakes_and_lands_where_it_was():
+    # Lifted 1 m through a view held all along: the step wakes its island and moves
+    # its broadphase proxy in the same step (the boxes are computed again after the
+    # wake), so it falls back onto the box below and rests on it, not inside it.
+    world, b = ground_and_box()
+    top = world.add_body(wmo.Box((1, 1, 1)), position=(0, 4, 0), mass=2.0)
+    world.step(150)
+    assert b.sleeping and top.sleeping
+    rest = top.position.copy()
+    view = world.positions
+    view[top.index, 1] += 1.0
+    world.step()
+    assert not top.sleeping
+    assert world.profile["update_broadphase"]["count"] == 2  # both proxies moved this step
+    world.step(180)
+    assert abs(top.position[1] - rest[1]) < 2e-3  # on the box again (it settles in 1 mm)
+    assert np.linalg.norm(top.position[[0, 2]] - rest[[0, 2]]) < 0.02  # the landing shifts it a little
+
+
 def test_contacts_and_profile():
     world, b = ground_and_box(sleeping=False)
     world.step(120)

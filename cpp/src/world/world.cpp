@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <exception>
 #include <limits>
 #include <utility>
 
@@ -31,9 +32,13 @@ enum Stage {
 /// Times one stage into the profile (RAII), with the stage's work count.
 class StageTimer {
  public:
-  StageTimer(StageProfile& p, long long count = 0) : p_(p), count_(count), t0_(Clock::now()) {}
+  StageTimer(StageProfile& p, long long count = 0)
+      : p_(p), count_(count), t0_(Clock::now()), exceptions_(std::uncaught_exceptions()) {}
   void set_count(long long c) { count_ = c; }
   ~StageTimer() {
+    // A stage that throws (the state check of step(), a body leaving the finite range)
+    // leaves its profile as it was, as the step leaves the world.
+    if (std::uncaught_exceptions() > exceptions_) return;
     const double s = std::chrono::duration<double>(Clock::now() - t0_).count();
     p_.seconds = s;
     p_.count = count_;
@@ -46,6 +51,7 @@ class StageTimer {
   StageProfile& p_;
   long long count_;
   Clock::time_point t0_;
+  int exceptions_;
 };
 
 template <class V>
@@ -603,34 +609,43 @@ int World::update_sleep() {
   return awake;
 }
 
-void World::validate_state() {
+namespace {
+
+// The quick test of one body's state (World::validate_state): one branch-free
+// pass decides whether anything needs a closer look. x - x is exactly 0 for a finite
+// x and NaN otherwise, so the sum below is 0 only when every coordinate is finite;
+// |q|^2 is checked against a band slightly inside the tolerance's, so a quaternion it
+// passes also passes the exact test (one square root per body, 4% of a free-fall
+// step before this test). `ok` is cleared by anything else, `unit` by a quaternion
+// not unit to rounding (|q|^2 more than 1e-15 from 1, which the exact loops
+// normalise).
+[[gnu::always_inline]] inline void quick_state_test(const Vec3& p, const Vec3& v, const Vec3& w, const Quat& q,
+                                                    bool& ok, bool& unit) {
+  constexpr Real kLo = (1 - kUnitQuatTolerance) * (1 - kUnitQuatTolerance) * (1 + 1e-12);
+  constexpr Real kHi = (1 + kUnitQuatTolerance) * (1 + kUnitQuatTolerance) * (1 - 1e-12);
+  const Real zero = ((p.x() - p.x()) + (p.y() - p.y()) + (p.z() - p.z())) +
+                    ((v.x() - v.x()) + (v.y() - v.y()) + (v.z() - v.z())) +
+                    ((w.x() - w.x()) + (w.y() - w.y()) + (w.z() - w.z()));
+  const Real q2 = q.squaredNorm();
+  ok &= (zero == 0) & (q2 >= kLo) & (q2 <= kHi);
+  unit &= std::abs(q2 - 1) <= 1e-15;
+}
+
+}  // namespace
+
+bool World::validate_state() {
   // The state arrays are writable views: check what the user may have written before
-  // anything moves, so bad values raise and leave the world as it was.
+  // anything moves, so bad values raise and leave the world as it was. The quick test
+  // first; anything it flags takes the exact loops.
   auto fail = [](const char* array, int i, const std::string& got) {
     throw InvalidArgument(std::string(array) + "[" + std::to_string(i) + "] " + got);
   };
-  // One branch-free pass over the state decides whether anything needs a closer look:
-  // x - x is exactly 0 for a finite x and NaN otherwise, so the sum below is 0 only
-  // when every coordinate is finite; |q|^2 is checked against a band slightly inside
-  // the tolerance's, so a quaternion it passes also passes the exact test below (one
-  // square root per body, 4% of a free-fall step before this pass). Anything else, and
-  // any quaternion not unit to rounding (1e-15, see the end), takes the exact loops.
   const int nb = body_count();
-  constexpr Real kLo = (1 - kUnitQuatTolerance) * (1 - kUnitQuatTolerance) * (1 + 1e-12);
-  constexpr Real kHi = (1 + kUnitQuatTolerance) * (1 + kUnitQuatTolerance) * (1 - 1e-12);
   bool all_ok = true, all_unit = true;
-  for (int i = 0; i < nb; ++i) {
-    const Vec3& p = positions_[i];
-    const Vec3& v = linear_velocities_[i];
-    const Vec3& w = angular_velocities_[i];
-    const Real zero = ((p.x() - p.x()) + (p.y() - p.y()) + (p.z() - p.z())) +
-                      ((v.x() - v.x()) + (v.y() - v.y()) + (v.z() - v.z())) +
-                      ((w.x() - w.x()) + (w.y() - w.y()) + (w.z() - w.z()));
-    const Real q2 = orientations_[i].squaredNorm();
-    all_ok &= (zero == 0) & (q2 >= kLo) & (q2 <= kHi);
-    all_unit &= std::abs(q2 - 1) <= 1e-15;
-  }
-  if (all_ok && all_unit && islands_.size() == free_islands_.size()) return;  // nothing asleep either
+  for (int i = 0; i < nb; ++i)
+    quick_state_test(positions_[i], linear_velocities_[i], angular_velocities_[i], orientations_[i], all_ok,
+                     all_unit);
+  if (all_ok && all_unit && islands_.size() == free_islands_.size()) return false;  // nothing asleep either
   if (!all_ok)
     for (int i = 0; i < nb; ++i) {
       if (!positions_[i].allFinite()) fail("positions", i, "must be finite, got " + to_string(positions_[i]));
@@ -645,32 +660,42 @@ void World::validate_state() {
   // A sleeping body has zero velocity and the pose it fell asleep at: anything else was
   // written by the user, and wakes its island. (Checked on the values as written,
   // before the normalisation below, which may change the last bit.)
+  bool changed = false;
   if (islands_.size() > free_islands_.size())  // some island sleeps
     for (int i = 0; i < body_count(); ++i) {
       if (sleep_island_[i] < 0) continue;
       if (!linear_velocities_[i].isZero(0) || !angular_velocities_[i].isZero(0) ||
-          positions_[i] != sleep_position_[i] || !(orientations_[i].coeffs() == sleep_orientation_[i].coeffs()))
+          positions_[i] != sleep_position_[i] || !(orientations_[i].coeffs() == sleep_orientation_[i].coeffs())) {
         wake_island(sleep_island_[i]);
+        changed = true;
+      }
     }
   // Within tolerance: normalised. One that is unit to rounding already (|q|^2 within
   // 1e-15 of 1, as every step leaves them) is left alone: normalising it would change
   // at most its last bits, for a square root and a division per body per step. Sleeping
   // bodies keep the (unit) orientation they fell asleep with, bit for bit, so that the
   // check above stays meaningful.
-  if (all_unit) return;
+  if (all_unit) return changed;
   for (int i = 0; i < nb; ++i)
-    if (sleep_island_[i] < 0 && std::abs(orientations_[i].squaredNorm() - 1) > 1e-15) orientations_[i].normalize();
+    if (sleep_island_[i] < 0 && std::abs(orientations_[i].squaredNorm() - 1) > 1e-15) {
+      orientations_[i].normalize();
+      changed = true;
+    }
+  return changed;
 }
 
 void World::step(int n) {
   if (n < 0) throw InvalidArgument("n must be >= 0, got " + std::to_string(n));
   if (n == 0) return;
-  // The state check only where the user may have written (the State accessors, world.h).
-  // A view released after the last step may have written before it was: one more check.
+  // The state check only where the user may have written (the State accessors, world.h),
+  // made by the first step's update_broadphase on the state it reads anyway. A view
+  // released after the last step may have written before it was: one more check.
   const bool held = state_views_held();
-  if (state_writable_ || state_shared_ || held) validate_state();
-  state_shared_ = held;
-  for (int k = 0; k < n; ++k) run_step();
+  const bool check = state_writable_ || state_shared_ || held;
+  for (int k = 0; k < n; ++k) {
+    run_step(check && k == 0);
+    if (k == 0) state_shared_ = held;  // the check passed
+  }
 }
 
 void World::integrate_velocities(Real h) {
@@ -1186,7 +1211,7 @@ Vec3 World::sliding_direction(const Manifold& m, int a, int b, const Vec3& com_a
 // Returns the number of proxies moved (kept within their fat boxes included). Its own
 // function: inside run_step the loop's values were spilled to the stack (the function's
 // many locals), ~13 ns a body.
-long long World::update_broadphase(bool ccd) {
+long long World::update_broadphase(bool ccd, bool check_state) {
   const int n = body_count();
   const Real dt = settings_.dt;
   const Real spec = settings_.speculative_distance;
@@ -1211,12 +1236,16 @@ long long World::update_broadphase(bool ccd) {
   const std::uint8_t* const traits = traits_.data();
   const std::shared_ptr<const Shape>* const shapes = shapes_.data();
   const ProxyId* const proxies = proxies_.data();
+  const Vec3* const ang = angular_velocities_.data();
+  bool all_ok = true, all_unit = true;  // the state check's quick test (check_state)
   auto flush = [&] {
     int good = count;
     if (finite != 0) [[unlikely]] {
-      // A non-finite box (a velocity blown up by a previous step of this call: step()
-      // validated the state it was given) is refused here, as move_proxy would,
-      // before the tree sees it; the bodies before it are moved, as one by one.
+      // A non-finite box is refused here, as move_proxy would, before the tree sees
+      // it; the bodies before it are moved, as one by one. Written by the user (the
+      // state check's step), validate_state names the value; else a velocity blew up
+      // in a previous step of this call.
+      if (check_state) validate_state();
       good = 0;
       while (boxes[good].min.allFinite() && boxes[good].max.allFinite()) ++good;
     }
@@ -1231,7 +1260,11 @@ long long World::update_broadphase(bool ccd) {
     finite = 0;
   };
   for (int i = 0; i < n; ++i) {
-    if (!awake[i]) continue;  // static or sleeping: the proxy stays where it is
+    if (!awake[i]) {  // static or sleeping: the proxy stays where it is
+      if (check_state) quick_state_test(pos[i], vel[i], ang[i], ori[i], all_ok, all_unit);
+      continue;
+    }
+    if (check_state) quick_state_test(pos[i], vel[i], ang[i], ori[i], all_ok, all_unit);
     // The box swept by the step's predicted translation (the larger of
     // speculative_motion and speculative_motion_static, whose pairs with fixed
     // geometry must be found before the body reaches it; all of it for a CCD body,
@@ -1278,10 +1311,18 @@ long long World::update_broadphase(bool ccd) {
     if (++count == kChunk) flush();
   }
   flush();
+  // The state check (World::step), its quick test made above on the values the boxes
+  // were computed from. Anything it flags, and any sleeping island (a sleeping body
+  // written to wakes), takes validate_state: a bad value throws there, with the state
+  // as the user left it (only the proxies' boxes, derived from it, have moved: the
+  // next step computes them anew); a woken island or a quaternion normalised there
+  // changes what the boxes are computed from, and they are computed again.
+  if (check_state && !(all_ok && all_unit && islands_.size() == free_islands_.size()) && validate_state())
+    return update_broadphase(ccd, false);
   return moved;
 }
 
-void World::run_step() {
+void World::run_step(bool check_state) {
   plain_runs_.clear();
   const int n = body_count();
   const Real dt = settings_.dt;
@@ -1305,7 +1346,7 @@ void World::run_step() {
   // ---- update_broadphase: proxies of bodies that can move. ----
   {
     StageTimer t(profile_[kUpdateBroadphase]);
-    t.set_count(update_broadphase(ccd));
+    t.set_count(update_broadphase(ccd, check_state));
   }
 
   // ---- find_pairs ----

@@ -327,9 +327,10 @@ class World {
   // written to wakes). Storage is shared (shared_array.h) so that NumPy views never
   // dangle.
   //
-  // Checking what was written costs a pass over every body's state at each step()
-  // (~3 us per 1,000 bodies, a tenth of 10,000 free-falling spheres' step), so step()
-  // makes it only where a write is possible: after any call of a writable accessor
+  // Checking what was written reads every body's state at each step() (a quick test
+  // made in the update_broadphase stage on the values it reads anyway, validate_state
+  // for anything it flags: ~3 us per 1,000 bodies, ~35 us as a pass of its own), so
+  // step() makes it only where a write is possible: after any call of a writable accessor
   // below (for good: the caller may keep the reference and write at any time), and
   // while a view from the shared_* accessors is alive, and at the first step() after
   // the last one is released. A world changed only through add_body, remove_body and
@@ -539,8 +540,12 @@ class World {
   /// One substep of awake (dynamic or kinematic) body i; its centre of mass moves by
   /// h v_move (s.v for a body in contact, the substep's mean velocity for a free one).
   void integrate_position(int i, BodyState& s, std::uint8_t f, Real h, const Vec3& v_move);
-  void run_step();
-  long long update_broadphase(bool ccd);  // the stage of that name; returns the count moved
+  /// One step; with check_state, the state check of step() first (in update_broadphase).
+  void run_step(bool check_state);
+  /// The stage of that name; returns the count moved. With check_state, also the state
+  /// check of step() (validate_state), on the values it reads anyway: a bad value
+  /// throws, with the state unchanged.
+  long long update_broadphase(bool ccd, bool check_state);
   /// The ccd stage (world.h, WorldSettings::enable_ccd); returns the bodies swept.
   int continuous_step();
   /// The ccd stage's last part: overlaps deeper than a CCD body's allowance that the
@@ -570,7 +575,12 @@ class World {
   /// The shock pass over shock_order_ after a substep's relax passes (world.cpp).
   void shock_pass(Real inv_h);
   bool ccd_active() const { return settings_.enable_ccd && ccd_count_ > 0; }
-  void validate_state();
+  /// Checks the state arrays (the user may have written them): a non-finite value or
+  /// a quaternion off unit by more than kUnitQuatTolerance throws InvalidArgument
+  /// naming the array and row; a sleeping body written to wakes its island; a
+  /// quaternion not unit to rounding is normalised. Returns true if it woke or
+  /// normalised anything.
+  bool validate_state();
   /// True while a shared_* view of the state storage is held (its use count above 1).
   bool state_views_held() const {
     return positions_.shared().use_count() > 1 || orientations_.shared().use_count() > 1 ||
