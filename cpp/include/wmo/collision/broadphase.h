@@ -199,6 +199,21 @@ class Broadphase {
     return keep;
   }
 
+  /// What keep_proxy_unchecked reads and writes, for a caller that runs the same test
+  /// on many proxies at once in its own (vectorised) loop (the world's free spheres):
+  /// by proxy id, the fat boxes it tests against and the tight boxes it sets; and the
+  /// rule's constants. `fat` is null where the algorithm keeps no fat boxes (the test
+  /// then always declines). Valid until the next call that creates or destroys a proxy.
+  struct KeepRule {
+    const Aabb* fat = nullptr;
+    Aabb* tight = nullptr;
+    Real margin = 0, multiplier = 0, slack_margins = 0;
+  };
+  KeepRule keep_rule() {
+    if (keep_.empty()) return {};
+    return {keep_.data(), tight_.data(), keep_margin_, keep_multiplier_, keep_slack_margins_};
+  }
+
   /// Finishes incremental work after a batch of create/destroy/move calls (re-sorting,
   /// candidate-pair update). query_pairs calls it itself when needed.
   void update();

@@ -314,6 +314,12 @@ class World {
   /// Handle of the body in dense row `index`.
   BodyId id_at(int index) const;
   int body_count() const { return positions_.size(); }
+  /// The broadphase (read-only) and body `index`'s proxy in it: its tight box is the
+  /// box update_broadphase last computed for the body (the shape's world box fattened
+  /// by the speculative distance and swept by the step's predicted motion), for
+  /// diagnostics and tests.
+  const Broadphase& broadphase() const { return *broadphase_; }
+  ProxyId proxy_of(int index) const { return proxies_[index]; }
 
   /// Advances the world by n steps of settings().dt. First checks the state arrays
   /// wherever the user may have written them (see below): a non-finite value or a
@@ -607,6 +613,7 @@ class World {
   // called (for good), a shared_* one since the last step or a view was held then.
   bool state_writable_ = false;
   bool state_shared_ = false;
+  std::vector<int> sphere_declined_;  // update_broadphase scratch (keep_sphere_boxes)
   std::vector<BodyKind> kinds_;
   std::vector<BodyMass> masses_;
   std::vector<std::shared_ptr<const Shape>> shapes_;
