@@ -715,6 +715,15 @@ namespace {
 #define WMO_TRANSLATE_CLONES
 #endif
 
+/// True if any of the m doubles at x is not 0 (NaN included): a flat pass over a
+/// chunk's angular velocities, so that a chunk of bodies that do not turn skips the
+/// per-body test (10,000 free-falling spheres: the solve stage ~51 -> ~?? us).
+WMO_TRANSLATE_CLONES bool any_nonzero(const Real* x, int m) {
+  long long any = 0;
+  for (int j = 0; j < m; ++j) any |= static_cast<long long>(!(x[j] == 0));
+  return any != 0;
+}
+
 /// `substeps` substeps of the free translation of m coordinates (integrate_plain_run):
 /// v1 = v0 + dv, x += half_h (v0 + v1), coordinate by coordinate.
 WMO_TRANSLATE_CLONES void translate_free(Real* __restrict x, Real* __restrict v, const Real* __restrict dv, int m,
@@ -802,6 +811,46 @@ WMO_TRANSLATE_CLONES int keep_sphere_boxes(int begin, int end, const Vec3* pos, 
 
 }  // namespace
 
+namespace {
+
+typedef std::uint8_t v32u8 __attribute__((vector_size(32)));
+
+/// The solve stage's scan for plain free bodies (run_step), 32 bodies at a time from
+/// `begin` while all 32 are plain: each gets flags[j] |= traits[j] | (gyro_bit if its
+/// inertia is not isotropic), and is plain if awake, dynamic and none of `not_plain`'s
+/// bits is set. Returns the first body of the first block with a body that is not
+/// plain (or of the tail under 32): the scalar loop takes over there. Two builds on
+/// x86-64 (AVX2 and the baseline). 10,000 free-falling spheres: ~15 -> ~?? us.
+WMO_TRANSLATE_CLONES int scan_plain_blocks(int begin, int n, const std::uint8_t* traits, const std::uint8_t* awake,
+                                           const std::uint8_t* kinds, std::uint8_t* flags, std::uint8_t gyro_bit,
+                                           std::uint8_t not_plain, std::uint8_t isotropic, std::uint8_t dynamic) {
+  constexpr int kBlock = 32;
+  auto load = [](const std::uint8_t* p) {
+    v32u8 x;
+    std::memcpy(&x, p, sizeof x);
+    return x;
+  };
+  const v32u8 zero = {};
+  int j = begin;
+  for (; j + kBlock <= n; j += kBlock) {
+    const v32u8 tr = load(traits + j);
+    const v32u8 anisotropic = (tr & isotropic) == zero;  // 0xFF where not isotropic
+    const v32u8 f = load(flags + j) | tr | (anisotropic & gyro_bit);
+    const v32u8 plain = (load(awake + j) != zero) & (load(kinds + j) == dynamic) & ((f & not_plain) == zero);
+    std::uint64_t all = ~std::uint64_t{0};
+    for (int k = 0; k < kBlock; k += 8) {
+      std::uint64_t lanes;
+      std::memcpy(&lanes, reinterpret_cast<const unsigned char*>(&plain) + k, sizeof lanes);
+      all &= lanes;
+    }
+    if (all != ~std::uint64_t{0}) break;
+    std::memcpy(flags + j, &f, sizeof f);
+  }
+  return j;
+}
+
+}  // namespace
+
 void World::integrate_plain_run(int begin, int end, Real h, int substeps) {
   if (end > begin) plain_runs_.emplace_back(begin, end);
   // Chunks of kChunk bodies take all their substeps while their state (104 bytes a
@@ -838,6 +887,7 @@ void World::integrate_plain_run(int begin, int end, Real h, int substeps) {
       dv[3 * (i - b) + 2] = d.z();
     }
     translate_free(pos[b].data(), vel[b].data(), dv.data(), m, half_h, substeps);
+    if (!any_nonzero(ang[b].data(), m)) continue;  // no body of the chunk turns
     for (int i = b; i < e; ++i) {
       const Vec3 w = ang[i];
       if ((w.x() == 0) & (w.y() == 0) & (w.z() == 0)) continue;
@@ -1635,7 +1685,9 @@ void World::run_step(bool check_state) {
     const std::uint8_t gyro_bit = gyro ? kGyroscopic : 0;
     for (int i = 0; i < n; ++i) {
       if (!has_forces_) {
-        int j = i;
+        int j = scan_plain_blocks(i, n, trait_p, awake_p, reinterpret_cast<const std::uint8_t*>(kind_p), flag_p,
+                                  gyro_bit, kNotPlain, static_cast<std::uint8_t>(kIsotropic),
+                                  static_cast<std::uint8_t>(BodyKind::kDynamic));
         for (; j < n; ++j) {
           const std::uint8_t tr = trait_p[j];
           const std::uint8_t anisotropic = static_cast<std::uint8_t>((tr & kIsotropic) ? 0 : 0xFF);
