@@ -793,15 +793,16 @@ WMO_TRANSLATE_CLONES int keep_sphere_boxes(int begin, int end, const Vec3* pos, 
     const auto id = static_cast<std::size_t>(proxies[i]);
     Real* const f = const_cast<Real*>(fat[id].min.data());  // min x, y, z, max x, y, z
     const v4d fmin = load4(f);                                 // lane 3: max x
-    const v4d fmax = __builtin_shuffle(load4(f + 2), v4l{1, 2, 3, 3});
+    const v4d fz = load4(f + 2);                             // min z, max x, y, z
+    const v4d fmax = __builtin_shufflevector(fz, fz, 1, 2, 3, 3);
     // x - x == 0 only for finite x.
     const v4l ok = (fmin <= lo_box) & (hi_box <= fmax) & (lo <= fmin) & (fmax <= hi) & ((p - p) == zero) &
                    ((v - v) == zero);
     if (ok[0] & ok[1] & ok[2]) {
       // The six doubles of the tight box in two overlapping stores.
       Real* const t = tight[id].min.data();
-      store4(t, __builtin_shuffle(lo_box, hi_box, v4l{0, 1, 2, 4}));
-      store4(t + 2, __builtin_shuffle(lo_box, hi_box, v4l{2, 4, 5, 6}));
+      store4(t, __builtin_shufflevector(lo_box, hi_box, 0, 1, 2, 4));
+      store4(t + 2, __builtin_shufflevector(lo_box, hi_box, 2, 4, 5, 6));
     } else {
       declined[count++] = i;
     }
