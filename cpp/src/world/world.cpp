@@ -767,13 +767,16 @@ typedef long long v4l __attribute__((vector_size(32)));
 WMO_TRANSLATE_CLONES int keep_sphere_boxes(int begin, int end, const Vec3* pos, const Vec3* vel,
                                            const std::shared_ptr<const Shape>* shapes, const ProxyId* proxies,
                                            Real spec, Real motion, Real static_motion, Real dt,
-                                           const Broadphase::KeepRule& kr, int* declined) {
+                                           const Broadphase::KeepRule& kr, int* declined, const Vec3* ang,
+                                           const Quat* ori, bool check_state, bool& all_ok, bool& all_unit) {
   int count = 0;
   const v4d zero{0, 0, 0, 0};
   const Aabb* const fat = kr.fat;
   Aabb* const tight = kr.tight;
   const Real margin = kr.margin, multiplier = kr.multiplier, base_slack = kr.slack_margins * kr.margin;
   for (int i = begin; i < end; ++i) {
+    // The state check's quick test (update_broadphase), where the step makes it.
+    if (check_state) quick_state_test(pos[i], vel[i], ang[i], ori[i], all_ok, all_unit);
     // (x, y, z) in lanes 0-2; lane 3 is whatever follows (the next row's x, while
     // there is a next row in the run) and is ignored by the verdict.
     const v4d p = i + 1 < end ? load4(pos[i].data()) : load3(pos[i].data());
@@ -1402,7 +1405,7 @@ long long World::update_broadphase(bool ccd, bool check_state) {
     finite = 0;
   };
   // One body's box: kept in its fat box, or batched for the broadphase.
-  auto visit = [&](int i) {
+  auto visit = [&](int i) __attribute__((always_inline)) {
     if (!awake[i]) {  // static or sleeping: the proxy stays where it is
       if (check_state) quick_state_test(pos[i], vel[i], ang[i], ori[i], all_ok, all_unit);
       return;
@@ -1453,18 +1456,20 @@ long long World::update_broadphase(bool ccd, bool check_state) {
     moves[count] = move;
     if (++count == kChunk) flush();
   };
-  // Runs of awake spheres, when nothing is swept whole and the state is not checked
-  // (the common step of many free bodies): their boxes and keep tests on vectors
-  // (keep_sphere_boxes); only the bodies it declines are visited one by one.
+  // Runs of awake spheres, when nothing is swept whole (the common step of many free
+  // bodies): their boxes and keep tests on vectors (keep_sphere_boxes, which also makes
+  // the state check's quick test on them); only the bodies it declines are visited one
+  // by one.
   const Broadphase::KeepRule kr = broadphase_->keep_rule();
-  const bool vector_spheres = kr.fat != nullptr && !ccd && !check_state;
+  const bool vector_spheres = kr.fat != nullptr && !ccd;
   if (vector_spheres) sphere_declined_.resize(n);
   int* const declined = sphere_declined_.data();
   for (int i = 0; i < n; ++i) {
     if (vector_spheres && awake[i] && (traits[i] & kSphere)) {
       int j = i + 1;
       while (j < n && awake[j] && (traits[j] & kSphere)) ++j;
-      const int c = keep_sphere_boxes(i, j, pos, vel, shapes, proxies, spec, motion, static_motion, dt, kr, declined);
+      const int c = keep_sphere_boxes(i, j, pos, vel, shapes, proxies, spec, motion, static_motion, dt, kr, declined,
+                                      ang, ori, check_state, all_ok, all_unit);
       moved += (j - i) - c;
       for (int k = 0; k < c; ++k) visit(declined[k]);
       i = j - 1;
