@@ -737,10 +737,6 @@ WMO_TRANSLATE_CLONES void translate_free(Real* __restrict x, Real* __restrict v,
     }
 }
 
-}  // namespace
-
-namespace {
-
 typedef double v4d __attribute__((vector_size(32)));
 typedef long long v4l __attribute__((vector_size(32)));
 
@@ -794,9 +790,9 @@ WMO_TRANSLATE_CLONES int keep_sphere_boxes(int begin, int end, const Vec3* pos, 
     const v4d lo = ((lo_box - margin) + (zero < dm ? zero : dm)) - slack;
     const v4d hi = ((hi_box + margin) + (dm < zero ? zero : dm)) + slack;
     const auto id = static_cast<std::size_t>(proxies[i]);
-    Real* const f = const_cast<Real*>(fat[id].min.data());  // min x, y, z, max x, y, z
-    const v4d fmin = load4(f);                                 // lane 3: max x
-    const v4d fz = load4(f + 2);                             // min z, max x, y, z
+    const Real* const f = fat[id].min.data();  // min x, y, z, max x, y, z
+    const v4d fmin = load4(f);                  // lane 3: max x
+    const v4d fz = load4(f + 2);                // min z, max x, y, z
     const v4d fmax = __builtin_shufflevector(fz, fz, 1, 2, 3, 3);
     // x - x == 0 only for finite x.
     const v4l ok = (fmin <= lo_box) & (hi_box <= fmax) & (lo <= fmin) & (fmax <= hi) & ((p - p) == zero) &
@@ -812,10 +808,6 @@ WMO_TRANSLATE_CLONES int keep_sphere_boxes(int begin, int end, const Vec3* pos, 
   }
   return count;
 }
-
-}  // namespace
-
-namespace {
 
 typedef std::uint8_t v32u8 __attribute__((vector_size(32)));
 

@@ -336,10 +336,10 @@ class World {
   // Checking what was written reads every body's state at each step() (a quick test
   // made in the update_broadphase stage on the values it reads anyway, validate_state
   // for anything it flags: ~3-4 us per 1,000 bodies), so step() makes it only where a
-  // write is possible: after any call of a writable accessor
-  // below (for good: the caller may keep the reference and write at any time), and
-  // while a view from the shared_* accessors is alive, and at the first step() after
-  // the last one is released. A world changed only through add_body, remove_body and
+  // write is possible: after any call of a writable accessor below (for good: the
+  // caller may keep the reference and write at any time), while a view from the
+  // shared_* accessors is alive, and at the first step() after the last one is
+  // released. A world changed only through add_body, remove_body and
   // the validating setters skips it: its state is then what those calls and the steps
   // made, which the check would pass unchanged (tests compare both routes bit for
   // bit). ----
