@@ -22,8 +22,14 @@
 // processor. No fused multiply-add is enabled in either, so both compute the same
 // bits. Other processors get one portable build of the same source.
 #include <algorithm>
+#include <atomic>
+#include <bit>
 #include <cmath>
 #include <cstring>
+#include <thread>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
 
 #include "wmo/dynamics/contact_solver.h"
 
@@ -162,11 +168,15 @@ WMO_INLINE Bodies gather_velocities(const std::array<int, L>& idx, const Row* ro
 
 /// Velocities back. Lanes that share a body that does not move (static, kinematic, the
 /// padding row) write the same unchanged values.
-WMO_INLINE void scatter(const std::array<int, L>& idx, const Bodies& b, Row* rows) {
+/// Writes the lanes of `moving` (bit l: lane l's body moves) back to their rows. The
+/// other lanes hold static, kinematic or padding bodies, which the rows change by exact
+/// zeros: their rows, which groups running at once may share, are only read.
+WMO_INLINE void scatter(const std::array<int, L>& idx, const Bodies& b, Row* rows, unsigned moving) {
   const v8 zero = splat(0);
   v8 c[8] = {b.v.x, b.v.y, b.v.z, b.w.x, b.w.y, b.w.z, zero, zero};
   transpose8(c);
-  for (int l = 0; l < L; ++l) std::memcpy(rows + idx[l], &c[l], 32);
+  for (int l = 0; l < L; ++l)
+    if (moving >> l & 1u) std::memcpy(rows + idx[l], &c[l], 32);
 }
 
 /// One side of a group: its bodies' motion since the step began, lane by lane.
@@ -313,8 +323,8 @@ WMO_CLONES void warm_start_groups(const Group* groups, int count, Row* rows) {
       const V3 imp = ld(p.normal_impulse) * n + ld(p.tangent_impulse[0]) * t1 + ld(p.tangent_impulse[1]) * t2;
       apply(a, b, m, ld3(p.ra_now), ld3(p.rb_now), imp);
     }
-    scatter(g.row_a, a, rows);
-    scatter(g.row_b, b, rows);
+    scatter(g.row_a, a, rows, g.moves_a);
+    scatter(g.row_b, b, rows, g.moves_b);
   }
 }
 
@@ -480,8 +490,8 @@ WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, SoftLanes dyn,
         apply(a, b, m, ra, rb, d0 * t1 + d1 * t2);
       }
     }
-    scatter(g.row_a, a, rows);
-    scatter(g.row_b, b, rows);
+    scatter(g.row_a, a, rows, g.moves_a);
+    scatter(g.row_b, b, rows, g.moves_b);
   }
 }
 
@@ -496,7 +506,85 @@ void pack_inertia(const Mat3& m, float (*out)[L], int lane) {
   out[5][lane] = static_cast<float>(m(1, 2));
 }
 
+/// A team runs the passes only with at least this many groups per thread.
+constexpr int kParallelMinGroups = 64;
+
+/// All threads of a team wait here until every one has arrived; what each wrote
+/// before is then visible to all. Spins (the batches between two barriers are a few
+/// microseconds of work), then yields, so a thread the system has descheduled is
+/// not spun against indefinitely.
+class SpinBarrier {
+ public:
+  explicit SpinBarrier(int threads) : threads_(threads) {}
+  void wait() {
+    const unsigned gen = generation_.load(std::memory_order_acquire);
+    if (arrived_.fetch_add(1, std::memory_order_acq_rel) == threads_ - 1) {
+      arrived_.store(0, std::memory_order_relaxed);
+      generation_.store(gen + 1, std::memory_order_release);
+      return;
+    }
+    for (int spins = 0; generation_.load(std::memory_order_acquire) == gen; ++spins) {
+      if (spins < 2048) {
+#if defined(__x86_64__) || defined(__i386__)
+        __builtin_ia32_pause();
+#endif
+      } else {
+        std::this_thread::yield();
+      }
+    }
+  }
+
+ private:
+  const int threads_;
+  std::atomic<int> arrived_{0};
+  std::atomic<unsigned> generation_{0};
+};
+
 }  // namespace
+
+void region_level_order(const std::vector<ContactConstraint>& cs, const std::vector<BodyState>& states,
+                        const std::vector<int>& region, int regions, std::vector<int>& order,
+                        std::vector<int>& starts, std::vector<int>& scratch) {
+  // scratch: [0, bodies) next free level per body (reset after each region, whose
+  // bodies no other region has; the boundary, last, starts from zeros too), then the
+  // constraints in region order, then one level per constraint, then level counts.
+  const std::size_t total = cs.size(), bodies = states.size();
+  scratch.assign(bodies + 2 * total, 0);
+  int* body_level = scratch.data();
+  int* seq = body_level + bodies;
+  int* level_of = seq + total;
+  starts.assign(static_cast<std::size_t>(regions) + 2, 0);
+  for (std::size_t k = 0; k < total; ++k) ++starts[static_cast<std::size_t>(region[k]) + 1];
+  for (int r = 0; r <= regions; ++r) starts[static_cast<std::size_t>(r) + 1] += starts[static_cast<std::size_t>(r)];
+  {
+    std::vector<int> next(starts.begin(), starts.end() - 1);
+    for (std::size_t k = 0; k < total; ++k) seq[next[static_cast<std::size_t>(region[k])]++] = static_cast<int>(k);
+  }
+  order.resize(total);
+  std::vector<int> count;
+  for (int r = 0; r <= regions; ++r) {
+    const int begin = starts[static_cast<std::size_t>(r)], end = starts[static_cast<std::size_t>(r) + 1];
+    int levels = 0;
+    for (int q = begin; q < end; ++q) {
+      const ContactConstraint& c = cs[static_cast<std::size_t>(seq[q])];
+      const bool da = moves(states[c.body_a]), db = moves(states[c.body_b]);
+      const int level = std::max(da ? body_level[c.body_a] : 0, db ? body_level[c.body_b] : 0);
+      if (da) body_level[c.body_a] = level + 1;
+      if (db) body_level[c.body_b] = level + 1;
+      level_of[q] = level;
+      levels = std::max(levels, level + 1);
+    }
+    for (int q = begin; q < end; ++q) {  // reset the region's bodies for the next one
+      const ContactConstraint& c = cs[static_cast<std::size_t>(seq[q])];
+      body_level[c.body_a] = body_level[c.body_b] = 0;
+    }
+    // Counting sort of the region by level, stable.
+    count.assign(static_cast<std::size_t>(levels) + 1, 0);
+    for (int q = begin; q < end; ++q) ++count[static_cast<std::size_t>(level_of[q]) + 1];
+    for (int l = 0; l < levels; ++l) count[static_cast<std::size_t>(l) + 1] += count[static_cast<std::size_t>(l)];
+    for (int q = begin; q < end; ++q) order[static_cast<std::size_t>(begin + count[static_cast<std::size_t>(level_of[q])]++)] = seq[q];
+  }
+}
 
 void dependency_level_order(const std::vector<ContactConstraint>& cs, const std::vector<BodyState>& states,
                             std::vector<int>& order, std::vector<int>& scratch) {
@@ -528,7 +616,7 @@ void dependency_level_order(const std::vector<ContactConstraint>& cs, const std:
 
 void WideContacts::build(const std::vector<ContactConstraint>& cs, const std::vector<int>& order,
                          const std::vector<BodyState>& states, int dummy, const ContactSoftness& soft,
-                         Real max_sag, Real h, bool centroid_rows) {
+                         Real max_sag, Real h, bool centroid_rows, const std::vector<int>& starts) {
   centroid_rows_ = centroid_rows;
   groups_.clear();
   source_.clear();
@@ -547,14 +635,23 @@ void WideContacts::build(const std::vector<ContactConstraint>& cs, const std::ve
     return r;
   };
   const int count = static_cast<int>(order.size());
+  // Region boundaries (starts): each recorded as the index of the group it opens; a
+  // group never reaches past the next one.
+  region_start_.clear();
+  std::size_t next_start = 0;
+  auto record_starts = [&](int q) {
+    for (; next_start < starts.size() && starts[next_start] <= q; ++next_start) region_start_.push_back(group_count());
+  };
   for (int q = 0; q < count;) {
+    record_starts(q);
+    const int limit = next_start < starts.size() ? starts[next_start] : count;
     Group& g = groups_.emplace_back();
     g.body_a.fill(dummy);
     g.body_b.fill(dummy);
     g.row_a.fill(0);
     g.row_b.fill(0);
     int lanes = 0;
-    while (lanes < L && q < count) {
+    while (lanes < L && q < limit) {
       const int k = order[q];
       const ContactConstraint& c = cs[k];
       // A constraint joins the group unless one of its dynamic bodies is already in it.
@@ -569,6 +666,8 @@ void WideContacts::build(const std::vector<ContactConstraint>& cs, const std::ve
       g.body_b[lanes] = c.body_b;
       g.row_a[lanes] = row(c.body_a);
       g.row_b[lanes] = row(c.body_b);
+      if (moves(states[c.body_a])) g.moves_a = static_cast<std::uint8_t>(g.moves_a | 1u << lanes);
+      if (moves(states[c.body_b])) g.moves_b = static_cast<std::uint8_t>(g.moves_b | 1u << lanes);
       g.inv_mass_a[lanes] = static_cast<float>(sa.inv_mass);
       g.inv_mass_b[lanes] = static_cast<float>(sb.inv_mass);
       pack_inertia(sa.inv_inertia, g.ia, lanes);
@@ -624,11 +723,12 @@ void WideContacts::build(const std::vector<ContactConstraint>& cs, const std::ve
     }
     for (int l = lanes; l < L; ++l) source_.push_back(-1);
   }
+  record_starts(count);
   rows_.assign(row_state_.size(), Row{});
   loaded_.assign(row_state_.size(), Row{});
   motion_.assign(row_state_.size(), MotionRow{});
   load(states);
-  prepare_groups(groups_.data(), group_count(), rows_.data());
+  for_groups([&](int begin, int end) { prepare_groups(groups_.data() + begin, end - begin, rows_.data()); });
   set_motion(states);
 }
 
@@ -656,7 +756,9 @@ void WideContacts::set_motion(const std::vector<BodyState>& states) {
     x.dq[3] = static_cast<float>(s.dq.w());
     x.turn2 = static_cast<float>(s.dq.vec().squaredNorm());
   }
-  turn_groups(groups_.data(), group_count(), motion_.data(), centroid_rows_);
+  for_groups([&](int begin, int end) {
+    turn_groups(groups_.data() + begin, end - begin, motion_.data(), centroid_rows_);
+  });
 }
 
 void WideContacts::load(const std::vector<BodyState>& states) {
@@ -687,9 +789,50 @@ void WideContacts::store(std::vector<BodyState>& states) const {
   }
 }
 
+template <class F>
+void WideContacts::for_groups(F&& f) const {
+  const int threads = team_ ? team_->size() : 1;
+  const int count = group_count();
+  if (threads < 2 || count < kParallelMinGroups * threads) {
+    f(0, count);
+    return;
+  }
+  team_->run([&](int t) { f(count * t / threads, count * (t + 1) / threads); });
+}
+
+template <class F>
+void WideContacts::run_groups(bool reverse, F&& f) {
+  const int threads = team_ ? team_->size() : 1;
+  const int regions = region_count();
+  if (threads < 2 || regions < 2 || group_count() < kParallelMinGroups * threads) {
+    f(0, group_count());  // the same order: regions one after another, then the boundary
+    return;
+  }
+  SpinBarrier barrier(threads);
+  team_->run([&](int t) {
+    auto own_regions = [&] {
+      for (int r = t; r < regions; r += threads) f(region_start(r), region_start(r + 1));
+    };
+    auto boundary = [&] {
+      if (t == 0) f(region_start(regions), region_start(regions + 1));
+    };
+    if (!reverse) {
+      own_regions();
+      barrier.wait();
+      boundary();
+    } else {
+      boundary();
+      barrier.wait();
+      own_regions();
+    }
+  });
+}
+
 void WideContacts::warm_start(std::vector<BodyState>& states) {
   load(states);
-  warm_start_groups(groups_.data(), group_count(), rows_.data());
+  run_groups(false, [&](int begin, int end) {
+    warm_start_groups(groups_.data() + begin, end - begin, rows_.data());
+  });
   store(states);
 }
 
@@ -700,14 +843,22 @@ void WideContacts::solve(std::vector<BodyState>& states, const ContactSoftness& 
     return SoftLanes{static_cast<float>(x.bias_rate), static_cast<float>(x.mass_scale),
                      static_cast<float>(x.impulse_scale), static_cast<float>(x.a2)};
   };
-  solve_groups(groups_.data(), group_count(), rows_.data(), lanes(soft.dynamic), lanes(soft.fixed),
-               static_cast<float>(inv_h), static_cast<float>(push_max), use_bias, reverse,
-               centroid_rows && centroid_rows_);
+  const SoftLanes dyn = lanes(soft.dynamic), fix = lanes(soft.fixed);
+  const bool centroid = centroid_rows && centroid_rows_;
+  run_groups(reverse, [&](int begin, int end) {
+    solve_groups(groups_.data() + begin, end - begin, rows_.data(), dyn, fix, static_cast<float>(inv_h),
+                 static_cast<float>(push_max), use_bias, reverse, centroid);
+  });
   store(states);
 }
 
 void WideContacts::unpack(std::vector<ContactConstraint>& cs) const {
-  for (int gi = 0; gi < group_count(); ++gi) {
+  // Each constraint is in one lane of one group: the parts write disjoint entries.
+  for_groups([&](int begin, int end) { unpack_groups(cs, begin, end); });
+}
+
+void WideContacts::unpack_groups(std::vector<ContactConstraint>& cs, int begin, int end) const {
+  for (int gi = begin; gi < end; ++gi) {
     const Group& g = groups_[gi];
     for (int l = 0; l < L; ++l) {
       const int k = source_[static_cast<std::size_t>(gi) * L + l];

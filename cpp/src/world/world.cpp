@@ -1068,6 +1068,80 @@ void World::integrate_position(int i, BodyState& s, std::uint8_t f, Real h, cons
   }
 }
 
+/// The solver's regions (World::solve_order): a pile with at least kRegionMinConstraints
+/// contact constraints is cut into kSolverRegions slabs, which the passes may run on
+/// that many threads at once. Fixed, not the thread count, so that the order, and with
+/// it every result, is the same for any number of threads. Four: two threads get two
+/// slabs each; the constraints that cross a cut (solved after the slabs, on one
+/// thread) are ~10% of the pyramid's. Below the minimum (256 lane groups) a pass takes
+/// a few tens of microseconds, too short to share, and the constraints keep their exact
+/// top-down sequence.
+constexpr int kSolverRegions = 4;
+constexpr std::size_t kRegionMinConstraints = 2048;
+
+void World::solve_order() {
+  // Slabs along the horizontal axis (world X, Y or Z, not the one nearest to up) over
+  // which the constraints spread most, cut at the quantiles of the constraints'
+  // positions (the mean of their dynamic bodies') so that each holds about as many; a
+  // body belongs to the slab its position falls in, a constraint to its dynamic
+  // bodies' slab, or to the boundary when they lie in two. Within each slab, and in
+  // the boundary, the constraints keep their top-down sequence (region_level_order).
+  const std::size_t total = constraints_.size();
+  solve_region_.assign(total, 0);
+  int regions = 1;
+  if (total >= kRegionMinConstraints) {
+    regions = kSolverRegions;
+    auto moving = [&](int b) { return states_[static_cast<std::size_t>(b)].inv_mass > 0; };
+    int up_axis = -1;
+    if (settings_.gravity.squaredNorm() > 0) settings_.gravity.cwiseAbs().maxCoeff(&up_axis);
+    Vec3 lo = Vec3::Constant(kInf), hi = Vec3::Constant(-kInf);
+    for (const ContactConstraint& c : constraints_)
+      for (const int b : {c.body_a, c.body_b})
+        if (moving(b)) {
+          lo = lo.cwiseMin(positions_[static_cast<std::size_t>(b)]);
+          hi = hi.cwiseMax(positions_[static_cast<std::size_t>(b)]);
+        }
+    int axis = 0;
+    Real spread = -1;
+    for (int d = 0; d < 3; ++d)
+      if (d != up_axis && hi[d] - lo[d] > spread) {
+        spread = hi[d] - lo[d];
+        axis = d;
+      }
+    solve_coord_.resize(total);
+    for (std::size_t k = 0; k < total; ++k) {
+      const ContactConstraint& c = constraints_[k];
+      Real sum = 0;
+      int n = 0;
+      for (const int b : {c.body_a, c.body_b})
+        if (moving(b)) {
+          sum += positions_[static_cast<std::size_t>(b)][axis];
+          ++n;
+        }
+      solve_coord_[k] = n ? sum / n : 0;
+    }
+    std::array<Real, kSolverRegions - 1> cut{};
+    for (int j = 1; j < kSolverRegions; ++j) {
+      auto at = solve_coord_.begin() + static_cast<std::ptrdiff_t>(total * static_cast<std::size_t>(j) / kSolverRegions);
+      std::nth_element(solve_coord_.begin(), at, solve_coord_.end());
+      cut[static_cast<std::size_t>(j) - 1] = *at;
+    }
+    auto slab = [&](int b) {
+      const Real x = positions_[static_cast<std::size_t>(b)][axis];
+      int r = 0;
+      for (const Real c : cut) r += x >= c;
+      return r;
+    };
+    for (std::size_t k = 0; k < total; ++k) {
+      const ContactConstraint& c = constraints_[k];
+      const bool da = moving(c.body_a), db = moving(c.body_b);
+      const int ra = da ? slab(c.body_a) : -1, rb = db ? slab(c.body_b) : -1;
+      solve_region_[k] = !da && !db ? 0 : !da ? rb : !db ? ra : ra == rb ? ra : regions;
+    }
+  }
+  region_level_order(constraints_, states_, solve_region_, regions, solve_order_, solve_starts_, solve_scratch_);
+}
+
 void World::order_pairs_top_down() {
   // Gauss-Seidel carries a load only as far as the order of its rows lets it in one
   // pass: solved from the top down, the weight of a stack reaches the ground within
@@ -1754,10 +1828,12 @@ void World::run_step(bool check_state) {
       prepare_contacts(constraints_, states_, settings_.solver, h, same_soft);
     } else if (contacts) {
       // The passes run on lane groups, in an order equivalent to the constraints'
-      // sequence (pairs top down) that keeps the groups full.
-      dependency_level_order(constraints_, states_, solve_order_, level_scratch_);
+      // sequence (pairs top down) that keeps the groups full, in regions on a large
+      // pile (solve_order).
+      solve_order();
+      wide_.set_team(pool_.get());
       wide_.build(constraints_, solve_order_, states_, n, soft, settings_.solver.max_sag, h,
-                  settings_.centroid_rows);
+                  settings_.centroid_rows, solve_starts_);
     }
     const Real push_max = settings_.solver.push_max;
     auto pass = [&](bool use_bias, bool reverse) {

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <random>
+#include <thread>
 #include <vector>
 
 #include "wmo/dynamics/contact_solver.h"
@@ -235,6 +236,130 @@ TEST(WideContacts, RefreshedInertiaReachesThePasses) {
     else
       EXPECT_GT(diff, 100 * kFloatTolerance) << diff;
   }
+}
+
+namespace {
+
+/// A ParallelTeam of plain threads, started for each run.
+class TestTeam final : public ParallelTeam {
+ public:
+  explicit TestTeam(int threads) : threads_(threads) {}
+  int size() const override { return threads_; }
+  void run(const std::function<void(int)>& fn) override {
+    std::vector<std::thread> others;
+    for (int t = 1; t < threads_; ++t) others.emplace_back([&fn, t] { fn(t); });
+    fn(0);
+    for (std::thread& th : others) th.join();
+    ++runs;
+  }
+  int runs = 0;
+
+ private:
+  int threads_;
+};
+
+/// Regions for `s`: the dynamic bodies split into `regions` runs of indices, each
+/// constraint in its dynamic bodies' run, or in the boundary (`regions`) when they
+/// are in two.
+std::vector<int> index_regions(const Scene& s, int regions) {
+  const int bodies = static_cast<int>(s.states.size()) - 1;
+  auto region_of = [&](int b) { return b * regions / bodies; };
+  std::vector<int> region;
+  for (const ContactConstraint& c : s.constraints) {
+    const bool da = s.states[c.body_a].inv_mass > 0, db = s.states[c.body_b].inv_mass > 0;
+    const int ra = region_of(c.body_a), rb = region_of(c.body_b);
+    region.push_back(!da ? rb : !db ? ra : ra == rb ? ra : regions);
+  }
+  return region;
+}
+
+/// Wide passes as World runs them (warm start, a biased pass, set_motion, a forward
+/// and a backward relax pass, per substep) over the constraints in `order`, with
+/// build's region `starts`, on `team` (none: one thread). Returns the region count.
+int run_ordered_passes(Scene& s, const std::vector<int>& order, const std::vector<int>& starts,
+                       ParallelTeam* team, int substeps = 4) {
+  SolverSettings settings;
+  ContactSoftness soft;
+  const Real h = 1.0 / 240;
+  prepare_contacts(s.constraints, s.states, settings, h, soft);
+  WideContacts w;
+  w.set_team(team);
+  w.build(s.constraints, order, s.states, static_cast<int>(s.states.size()) - 1, {}, 0, 0, true, starts);
+  for (int sub = 0; sub < substeps; ++sub) {
+    w.warm_start(s.states);
+    w.solve(s.states, soft, 1 / h, settings.push_max, true);
+    w.set_motion(s.states);
+    w.solve(s.states, soft, 1 / h, settings.push_max, false);
+    w.solve(s.states, soft, 1 / h, settings.push_max, false, /*reverse=*/true);
+  }
+  w.unpack(s.constraints);
+  return w.region_count();
+}
+
+/// run_ordered_passes in region_level_order over `regions` index regions.
+int run_region_passes(Scene& s, int regions, ParallelTeam* team) {
+  std::vector<int> order, starts, scratch;
+  region_level_order(s.constraints, s.states, index_regions(s, regions), regions, order, starts, scratch);
+  return run_ordered_passes(s, order, starts, team);
+}
+
+}  // namespace
+
+TEST(WideContacts, RegionLevelOrderComputesTheSequenceWithTheBoundaryLast) {
+  // The regions' constraints in their own sequence, then the boundary's: passes over
+  // that sequence (a stable partition by region, no regions for build) and passes in
+  // region_level_order agree; every index appears once, in its region's range.
+  for (const auto [bodies, count] : {std::pair{40, 200}, std::pair{400, 600}}) {
+    Scene scalar = random_scene(bodies, 3, count, 41 + bodies);
+    const std::vector<int> region = index_regions(scalar, 4);
+    std::vector<int> order, starts, scratch;
+    region_level_order(scalar.constraints, scalar.states, region, 4, order, starts, scratch);
+    ASSERT_EQ(starts.size(), 6u);
+    EXPECT_EQ(starts.front(), 0);
+    EXPECT_EQ(starts.back(), count);
+    for (int r = 0; r <= 4; ++r)
+      for (int q = starts[r]; q < starts[r + 1]; ++q) EXPECT_EQ(region[order[q]], r);
+    std::vector<int> sorted = order;
+    std::sort(sorted.begin(), sorted.end());
+    for (int k = 0; k < count; ++k) ASSERT_EQ(sorted[k], k);
+    Scene wide = scalar;
+    Scene reference = scalar;
+    std::vector<int> sequence(count);
+    for (int k = 0; k < count; ++k) sequence[k] = k;
+    std::stable_sort(sequence.begin(), sequence.end(), [&](int a, int b) { return region[a] < region[b]; });
+    run_ordered_passes(reference, sequence, {}, nullptr);
+    EXPECT_EQ(run_region_passes(wide, 4, nullptr), 4);
+    expect_same(reference, wide);
+    // Without the boundary moved last (the plain sequence), the result differs: the
+    // check can fail.
+    Scene plain = scalar;
+    std::vector<int> identity(count);
+    for (int k = 0; k < count; ++k) identity[k] = k;
+    run_ordered_passes(plain, identity, {}, nullptr);
+    EXPECT_GT(max_difference(plain, wide, /*velocities_only=*/true), 100 * kFloatTolerance);
+  }
+}
+
+TEST(WideContacts, ATeamComputesTheSameBitsAsOneThread) {
+  // 4 regions of a sparse graph (long regions, a boundary of the constraints between
+  // them), on 1, 2 and 3 threads: the regions share no moving body, so they commute
+  // exactly and every velocity and impulse is the same bit for bit. Enough groups
+  // (~600) that the team takes the passes (kParallelMinGroups per thread).
+  Scene one = random_scene(6000, 10, 5000, 5);
+  Scene base = one;
+  EXPECT_EQ(run_region_passes(one, 4, nullptr), 4);
+  for (const int threads : {2, 3}) {
+    Scene many = base;
+    TestTeam team(threads);
+    run_region_passes(many, 4, &team);
+    EXPECT_GT(team.runs, 0);  // the team did run the passes
+    EXPECT_EQ(max_difference(one, many), 0) << threads << " threads";
+  }
+  // And a regrouping does change bits (the check can fail): the same scene in one
+  // region, i.e. the boundary constraints among the others.
+  Scene single = base;
+  run_region_passes(single, 1, nullptr);
+  EXPECT_GT(max_difference(one, single), 0);
 }
 
 namespace {

@@ -26,6 +26,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include "wmo/math.h"
@@ -293,6 +294,31 @@ void apply_restitution(std::vector<ContactConstraint>& cs, std::vector<BodyState
 void dependency_level_order(const std::vector<ContactConstraint>& cs, const std::vector<BodyState>& states,
                             std::vector<int>& order, std::vector<int>& scratch);
 
+/// Writes to `order` the indices of `cs` region by region, for passes that run the
+/// regions on several threads: `region[k]` (0 .. regions) is constraint k's region,
+/// where regions 0 .. regions - 1 must share no dynamic body (the caller partitions the
+/// bodies and gives a constraint the region of its dynamic bodies) and `regions` is the
+/// boundary, the constraints whose dynamic bodies lie in different regions. Each
+/// region's constraints keep their given sequence in dependency_level_order's form;
+/// the boundary comes last. `starts` receives regions + 2 offsets: region r is
+/// order[starts[r], starts[r + 1]), the boundary order[starts[regions], end). Gauss-
+/// Seidel passes in this order compute what passes over the given sequence with every
+/// boundary constraint moved to its end compute; the regions commute. `scratch` is
+/// reused storage. O(constraints + bodies).
+void region_level_order(const std::vector<ContactConstraint>& cs, const std::vector<BodyState>& states,
+                        const std::vector<int>& region, int regions, std::vector<int>& order,
+                        std::vector<int>& starts, std::vector<int>& scratch);
+
+/// Threads for WideContacts' passes (World's ThreadPool implements it): run(fn) calls
+/// fn(t) for every t in [0, size()) concurrently, t = 0 on the calling thread, and
+/// returns when all have returned.
+class ParallelTeam {
+ public:
+  virtual ~ParallelTeam() = default;
+  virtual int size() const = 0;
+  virtual void run(const std::function<void(int)>& fn) = 0;
+};
+
 /// The contacts regrouped for the solver's passes: groups of kLanes (8) constraints with
 /// no dynamic body in common, stored lane by lane (structure of arrays), so each pass
 /// runs one group's rows for all its lanes at once in 8-wide single-precision
@@ -326,9 +352,12 @@ class WideContacts {
   /// stiffening (SolverSettings::max_sag) from its load, as prepare_contacts does; the
   /// defaults leave every point at 1. `centroid_rows` prepares the centroid rows (each
   /// set_motion then computes what they read); solve may run them only if it is set.
+  /// `starts` (optional, from region_level_order): offsets into `order` where a region
+  /// begins, the last one the boundary's; no group spans two regions, and with a team
+  /// (set_team) the regions run at once (see there).
   void build(const std::vector<ContactConstraint>& cs, const std::vector<int>& order,
              const std::vector<BodyState>& states, int dummy, const ContactSoftness& soft = {},
-             Real max_sag = 0, Real h = 0, bool centroid_rows = true);
+             Real max_sag = 0, Real h = 0, bool centroid_rows = true, const std::vector<int>& starts = {});
   /// Reads the bodies' motion since the step began (dp, dq) from `states` and sets what
   /// the passes read of it: each point's anchors turned with the bodies
   /// (current_anchors), its separation now and its effective mass (row_mass). build()
@@ -356,6 +385,20 @@ class WideContacts {
   /// back to `cs` (the constraints given to build), what apply_restitution reads.
   void unpack(std::vector<ContactConstraint>& cs) const;
   int group_count() const { return static_cast<int>(groups_.size()); }
+  /// Threads for the work on the groups (none: the calling thread alone). With a team
+  /// of two or more, build's regions (two or more) and enough groups for each thread
+  /// (kParallelMinGroups in contact_solver_wide.cpp), warm_start and solve run the
+  /// regions at once, thread t taking regions t, t + size, ..., and then the boundary
+  /// on thread 0 (backward passes: the boundary first). The regions share no moving
+  /// body, so they commute exactly (each group writes only its own moving bodies'
+  /// rows), and the result is bit for bit the one without a team, for any number of
+  /// threads. The work on each group alone (build's effective masses, set_motion,
+  /// unpack) is split into contiguous parts, one per thread.
+  void set_team(ParallelTeam* team) { team_ = team; }
+  /// Regions (build's `starts`): region r is the groups [region_start(r),
+  /// region_start(r + 1)), the last of region_count() + 1 the boundary's.
+  int region_count() const { return static_cast<int>(region_start_.size()) - 2; }
+  int region_start(int r) const { return region_start_[static_cast<std::size_t>(r)]; }
 
   /// One group: lane l holds constraint source_[kLanes g + l]. Every quantity is an
   /// array over the lanes; vectors are stored per component ([3][kLanes]).
@@ -365,6 +408,9 @@ class WideContacts {
     int points = 0;           ///< largest point count among the lanes
     bool friction = false;    ///< some lane has friction
     bool stiffened = false;   ///< some point has stiffening > 1 (SolverSettings::max_sag)
+    /// Bit l set where lane l's body A (B) moves: only those rows are written back (a
+    /// static or kinematic body's row, which several groups may share, is only read).
+    std::uint8_t moves_a = 0, moves_b = 0;
     alignas(32) float inv_mass_a[kLanes] = {}, inv_mass_b[kLanes] = {};
     /// World inverse inertia (at the step's start, or as refresh_inertia last set it),
     /// symmetric: xx, yy, zz, xy, xz, yz.
@@ -430,6 +476,17 @@ class WideContacts {
   std::vector<int> row_moves_;   ///< per row: 1 if its body moves (receives velocity changes)
   std::vector<std::uint8_t> refresh_;  ///< per row: scratch of refresh_inertia
   std::vector<int> row_of_;      ///< per state: its row, -1 if none (build's scratch)
+  /// Runs f(begin, end) over the groups as the passes visit them (see set_team):
+  /// on the team region by region, else in one call over all of them.
+  template <class F>
+  void run_groups(bool reverse, F&& f);
+  /// Runs f(begin, end) over contiguous parts of the groups, one per thread, for work
+  /// on each group alone (no order between groups).
+  template <class F>
+  void for_groups(F&& f) const;
+  void unpack_groups(std::vector<ContactConstraint>& cs, int begin, int end) const;
+  ParallelTeam* team_ = nullptr;
+  std::vector<int> region_start_;  ///< see region_count
 };
 
 }  // namespace wmo

@@ -245,9 +245,12 @@ struct WorldSettings {
   /// games usually want).
   bool gyroscopic = false;
   BroadphaseType broadphase = BroadphaseType::kAabbTree;
-  /// Threads for the step's parallel stages (the narrowphase), the caller's included.
+  /// Threads for the step's parallel stages, the caller's included: the narrowphase,
+  /// and on a pile of at least 2,048 contact constraints the solver's passes (its
+  /// four regions at once, then the constraints between them; World::solve_order).
   /// Results are bit-identical for any count: work is split into fixed parts and
-  /// joined in order. 1 (the default) starts no thread.
+  /// joined in order, and the solver's regions do not depend on the count. 1 (the
+  /// default) starts no thread.
   int threads = 1;
   /// Sleeping (Box2D v3's rule and thresholds): bodies connected by contacts form an
   /// island; when every body of an island has moved slower than both thresholds for
@@ -519,6 +522,9 @@ class World {
   static constexpr std::size_t kMinParallelPairs = 64;
   /// Sorts the step's pairs from the top down (see world.cpp).
   void order_pairs_top_down();
+  /// The solver's order of constraints_ (solve_order_, solve_starts_): their top-down
+  /// sequence, split into regions when there are enough of them (see world.cpp).
+  void solve_order();
   /// Unit tangential direction of the slip at manifold m (zero if below 1e-4 m/s).
   Vec3 sliding_direction(const Manifold& m, int a, int b, const Vec3& com_a, const Vec3& com_b) const;
   Real pair_motion_margin(int a, int b) const;
@@ -737,8 +743,10 @@ class World {
   std::vector<ManifoldKey> constraint_keys_;
   std::vector<ManifoldGeometry> constraint_geometry_;  ///< per constraint, for the cache
   std::vector<int> constraint_entries_;  ///< per constraint (NarrowphaseOut::entries)
-  /// The order the solver visits constraints_ in (dependency_level_order) and its scratch.
-  std::vector<int> solve_order_, level_scratch_;
+  /// The order the solver visits constraints_ in (solve_order: region_level_order),
+  /// its regions' starts, each constraint's region and scratch.
+  std::vector<int> solve_order_, solve_starts_, solve_region_, solve_scratch_;
+  std::vector<Real> solve_coord_;
   WideContacts wide_;  ///< the solver's lane-grouped copy of constraints_ (contact_solver.h)
   // Scratch of order_pairs_top_down (kept to avoid allocating every step).
   std::vector<std::uint64_t> order_scratch_;
