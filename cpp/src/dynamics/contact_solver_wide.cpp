@@ -168,15 +168,14 @@ WMO_INLINE Bodies gather_velocities(const std::array<int, L>& idx, const Row* ro
 
 /// Velocities back. Lanes that share a body that does not move (static, kinematic, the
 /// padding row) write the same unchanged values.
-/// Writes the lanes of `moving` (bit l: lane l's body moves) back to their rows. The
-/// other lanes hold static, kinematic or padding bodies, which the rows change by exact
-/// zeros: their rows, which groups running at once may share, are only read.
-WMO_INLINE void scatter(const std::array<int, L>& idx, const Bodies& b, Row* rows, unsigned moving) {
+/// Writes each lane's velocities to its row in `idx` (Group::write_a / write_b: a sink
+/// row for the lanes of static, kinematic and padding bodies, which the rows change by
+/// exact zeros).
+WMO_INLINE void scatter(const std::array<int, L>& idx, const Bodies& b, Row* rows) {
   const v8 zero = splat(0);
   v8 c[8] = {b.v.x, b.v.y, b.v.z, b.w.x, b.w.y, b.w.z, zero, zero};
   transpose8(c);
-  for (int l = 0; l < L; ++l)
-    if (moving >> l & 1u) std::memcpy(rows + idx[l], &c[l], 32);
+  for (int l = 0; l < L; ++l) std::memcpy(rows + idx[l], &c[l], 32);
 }
 
 /// One side of a group: its bodies' motion since the step began, lane by lane.
@@ -323,8 +322,8 @@ WMO_CLONES void warm_start_groups(const Group* groups, int count, Row* rows) {
       const V3 imp = ld(p.normal_impulse) * n + ld(p.tangent_impulse[0]) * t1 + ld(p.tangent_impulse[1]) * t2;
       apply(a, b, m, ld3(p.ra_now), ld3(p.rb_now), imp);
     }
-    scatter(g.row_a, a, rows, g.moves_a);
-    scatter(g.row_b, b, rows, g.moves_b);
+    scatter(g.write_a, a, rows);
+    scatter(g.write_b, b, rows);
   }
 }
 
@@ -490,8 +489,8 @@ WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, SoftLanes dyn,
         apply(a, b, m, ra, rb, d0 * t1 + d1 * t2);
       }
     }
-    scatter(g.row_a, a, rows, g.moves_a);
-    scatter(g.row_b, b, rows, g.moves_b);
+    scatter(g.write_a, a, rows);
+    scatter(g.write_b, b, rows);
   }
 }
 
@@ -508,6 +507,10 @@ void pack_inertia(const Mat3& m, float (*out)[L], int lane) {
 
 /// A team runs the passes only with at least this many groups per thread.
 constexpr int kParallelMinGroups = 64;
+/// How many constraints past the first unplaced one build examines to fill a group:
+/// enough to fill the pyramid's (measured below), few enough that a long run of
+/// conflicting constraints costs little.
+constexpr int kLookahead = 32;
 
 /// All threads of a team wait here until every one has arrived; what each wrote
 /// before is then visible to all. Spins (the batches between two barriers are a few
@@ -542,47 +545,79 @@ class SpinBarrier {
 
 }  // namespace
 
-void region_level_order(const std::vector<ContactConstraint>& cs, const std::vector<BodyState>& states,
-                        const std::vector<int>& region, int regions, std::vector<int>& order,
-                        std::vector<int>& starts, std::vector<int>& scratch) {
-  // scratch: [0, bodies) next free level per body (reset after each region, whose
-  // bodies no other region has; the boundary, last, starts from zeros too), then the
-  // constraints in region order, then one level per constraint, then level counts.
+namespace {
+std::vector<int>& scratch_touched() {
+  thread_local std::vector<int> v;
+  return v;
+}
+std::vector<int>& scratch_buffer() {
+  thread_local std::vector<int> v;
+  return v;
+}
+}  // namespace
+
+void region_band_order(const std::vector<ContactConstraint>& cs, const std::vector<BodyState>& states,
+                       const std::vector<int>& region, int regions, const std::vector<Real>& height,
+                       const std::vector<Real>& band, std::vector<int>& order, std::vector<int>& starts,
+                       std::vector<std::uint64_t>& scratch) {
+  // scratch: [0, bodies) the colours each body has taken in the current band (a bit
+  // mask), then each constraint's colour (a byte per constraint, by index).
   const std::size_t total = cs.size(), bodies = states.size();
-  scratch.assign(bodies + 2 * total, 0);
-  int* body_level = scratch.data();
-  int* seq = body_level + bodies;
-  int* level_of = seq + total;
+  scratch.assign(bodies + total / 8 + 1, 0);
+  std::uint64_t* used = scratch.data();
+  std::uint64_t* key = used + bodies;
   starts.assign(static_cast<std::size_t>(regions) + 2, 0);
   for (std::size_t k = 0; k < total; ++k) ++starts[static_cast<std::size_t>(region[k]) + 1];
   for (int r = 0; r <= regions; ++r) starts[static_cast<std::size_t>(r) + 1] += starts[static_cast<std::size_t>(r)];
+  order.resize(total);
   {
     std::vector<int> next(starts.begin(), starts.end() - 1);
-    for (std::size_t k = 0; k < total; ++k) seq[next[static_cast<std::size_t>(region[k])]++] = static_cast<int>(k);
+    for (std::size_t k = 0; k < total; ++k) order[static_cast<std::size_t>(next[static_cast<std::size_t>(region[k])]++)] = static_cast<int>(k);
   }
-  order.resize(total);
-  std::vector<int> count;
+  // Per band (a run of the region's sequence), a counting sort by colour, stable.
+  std::vector<int>& touched = scratch_touched();
+  std::vector<int>& buffer = scratch_buffer();
+  std::array<int, 65> bucket;
+  std::uint8_t* colour_of = reinterpret_cast<std::uint8_t*>(key);  // one byte a constraint, by index
+  auto sort_band = [&](int begin, int end) {
+    bucket.fill(0);
+    for (int q = begin; q < end; ++q) ++bucket[colour_of[order[static_cast<std::size_t>(q)]] + 1u];
+    for (int c = 0; c < 64; ++c) bucket[static_cast<std::size_t>(c) + 1] += bucket[static_cast<std::size_t>(c)];
+    buffer.resize(static_cast<std::size_t>(end - begin));
+    for (int q = begin; q < end; ++q) {
+      const int k = order[static_cast<std::size_t>(q)];
+      buffer[static_cast<std::size_t>(bucket[colour_of[k]]++)] = k;
+    }
+    std::copy(buffer.begin(), buffer.end(), order.begin() + begin);
+  };
   for (int r = 0; r <= regions; ++r) {
     const int begin = starts[static_cast<std::size_t>(r)], end = starts[static_cast<std::size_t>(r) + 1];
-    int levels = 0;
+    Real top = 0, width = 0;
+    int band_begin = begin;
     for (int q = begin; q < end; ++q) {
-      const ContactConstraint& c = cs[static_cast<std::size_t>(seq[q])];
+      const int k = order[static_cast<std::size_t>(q)];
+      if (q == begin || !(height[static_cast<std::size_t>(k)] >= top - width)) {  // a NaN height opens a band
+        if (q > band_begin) sort_band(band_begin, q);
+        band_begin = q;
+        for (const int body : touched) used[body] = 0;
+        touched.clear();
+        top = height[static_cast<std::size_t>(k)];
+        width = band[static_cast<std::size_t>(k)];
+      }
+      const ContactConstraint& c = cs[static_cast<std::size_t>(k)];
       const bool da = moves(states[c.body_a]), db = moves(states[c.body_b]);
-      const int level = std::max(da ? body_level[c.body_a] : 0, db ? body_level[c.body_b] : 0);
-      if (da) body_level[c.body_a] = level + 1;
-      if (db) body_level[c.body_b] = level + 1;
-      level_of[q] = level;
-      levels = std::max(levels, level + 1);
+      const std::uint64_t taken = (da ? used[c.body_a] : 0) | (db ? used[c.body_b] : 0);
+      const int colour = taken == ~std::uint64_t(0) ? 63 : std::countr_one(taken);
+      colour_of[k] = static_cast<std::uint8_t>(colour);
+      for (const int body : {da ? c.body_a : -1, db ? c.body_b : -1}) {
+        if (body < 0) continue;
+        if (!used[body]) touched.push_back(body);
+        used[body] |= std::uint64_t(1) << colour;
+      }
     }
-    for (int q = begin; q < end; ++q) {  // reset the region's bodies for the next one
-      const ContactConstraint& c = cs[static_cast<std::size_t>(seq[q])];
-      body_level[c.body_a] = body_level[c.body_b] = 0;
-    }
-    // Counting sort of the region by level, stable.
-    count.assign(static_cast<std::size_t>(levels) + 1, 0);
-    for (int q = begin; q < end; ++q) ++count[static_cast<std::size_t>(level_of[q]) + 1];
-    for (int l = 0; l < levels; ++l) count[static_cast<std::size_t>(l) + 1] += count[static_cast<std::size_t>(l)];
-    for (int q = begin; q < end; ++q) order[static_cast<std::size_t>(begin + count[static_cast<std::size_t>(level_of[q])]++)] = seq[q];
+    if (end > band_begin) sort_band(band_begin, end);
+    for (const int body : touched) used[body] = 0;
+    touched.clear();
   }
 }
 
@@ -620,10 +655,13 @@ void WideContacts::build(const std::vector<ContactConstraint>& cs, const std::ve
   centroid_rows_ = centroid_rows;
   groups_.clear();
   source_.clear();
-  // Rows: 0 for the padding lanes, then the bodies in the order the groups use them.
+  // Rows: 0 for the padding lanes, then a sink row per region (every other row, so
+  // that no two share a cache line; see Group::write_a), then the bodies in the order
+  // the groups use them.
+  const int sinks = std::max(1, static_cast<int>(starts.size()) - 1);
   row_of_.assign(states.size(), -1);
-  row_state_.assign(1, dummy);
-  row_moves_.assign(1, 0);
+  row_state_.assign(static_cast<std::size_t>(1 + 2 * sinks), dummy);
+  row_moves_.assign(static_cast<std::size_t>(1 + 2 * sinks), 0);
   row_of_[dummy] = 0;
   auto row = [&](int body) {
     int& r = row_of_[body];
@@ -642,32 +680,53 @@ void WideContacts::build(const std::vector<ContactConstraint>& cs, const std::ve
   auto record_starts = [&](int q) {
     for (; next_start < starts.size() && starts[next_start] <= q; ++next_start) region_start_.push_back(group_count());
   };
+  // Filling a group: the first constraint not yet placed opens it, and up to
+  // kLookahead more are examined after it. One joins unless it shares a dynamic body
+  // with the group (no two lanes may) or with one examined and passed over before it
+  // in this group (for every body the constraints keep their order, so the passes
+  // compute what the given order computes, bit for bit: constraints with no dynamic
+  // body in common commute). In a region's level order the levels of a wide pile
+  // hold a few constraints each; taking only the run up to the first conflict left
+  // the pyramid's groups a fifth emptier when it was cut into regions.
+  placed_.assign(static_cast<std::size_t>(count), 0);
+  in_group_.assign(states.size(), -1);
+  passed_over_.assign(states.size(), -1);
   for (int q = 0; q < count;) {
     record_starts(q);
     const int limit = next_start < starts.size() ? starts[next_start] : count;
+    const int gid = group_count();
+    const int sink = 1 + 2 * std::max(0, static_cast<int>(region_start_.size()) - 1);
     Group& g = groups_.emplace_back();
     g.body_a.fill(dummy);
     g.body_b.fill(dummy);
     g.row_a.fill(0);
     g.row_b.fill(0);
+    g.write_a.fill(sink);
+    g.write_b.fill(sink);
     int lanes = 0;
-    while (lanes < L && q < limit) {
-      const int k = order[q];
+    for (int at = q, examined = 0; lanes < L && at < limit && examined <= kLookahead; ++at) {
+      if (placed_[static_cast<std::size_t>(at)]) continue;
+      ++examined;
+      const int k = order[at];
       const ContactConstraint& c = cs[k];
-      // A constraint joins the group unless one of its dynamic bodies is already in it.
-      bool independent = true;
-      for (int l = 0; l < lanes && independent; ++l)
-        for (const int body : {c.body_a, c.body_b})
-          if (moves(states[body]) && (body == g.body_a[l] || body == g.body_b[l])) independent = false;
-      if (!independent) break;
+      const bool ma = moves(states[c.body_a]), mb = moves(states[c.body_b]);
+      if ((ma && (in_group_[c.body_a] == gid || passed_over_[c.body_a] == gid)) ||
+          (mb && (in_group_[c.body_b] == gid || passed_over_[c.body_b] == gid))) {
+        if (ma) passed_over_[c.body_a] = gid;
+        if (mb) passed_over_[c.body_b] = gid;
+        continue;
+      }
+      placed_[static_cast<std::size_t>(at)] = 1;
+      if (ma) in_group_[c.body_a] = gid;
+      if (mb) in_group_[c.body_b] = gid;
       const BodyState& sa = states[c.body_a];
       const BodyState& sb = states[c.body_b];
       g.body_a[lanes] = c.body_a;
       g.body_b[lanes] = c.body_b;
       g.row_a[lanes] = row(c.body_a);
       g.row_b[lanes] = row(c.body_b);
-      if (moves(states[c.body_a])) g.moves_a = static_cast<std::uint8_t>(g.moves_a | 1u << lanes);
-      if (moves(states[c.body_b])) g.moves_b = static_cast<std::uint8_t>(g.moves_b | 1u << lanes);
+      if (ma) g.write_a[lanes] = g.row_a[lanes];
+      if (mb) g.write_b[lanes] = g.row_b[lanes];
       g.inv_mass_a[lanes] = static_cast<float>(sa.inv_mass);
       g.inv_mass_b[lanes] = static_cast<float>(sb.inv_mass);
       pack_inertia(sa.inv_inertia, g.ia, lanes);
@@ -719,9 +778,9 @@ void WideContacts::build(const std::vector<ContactConstraint>& cs, const std::ve
       }
       source_.push_back(k);
       ++lanes;
-      ++q;
     }
     for (int l = lanes; l < L; ++l) source_.push_back(-1);
+    while (q < limit && placed_[static_cast<std::size_t>(q)]) ++q;
   }
   record_starts(count);
   rows_.assign(row_state_.size(), Row{});

@@ -1073,9 +1073,9 @@ void World::integrate_position(int i, BodyState& s, std::uint8_t f, Real h, cons
 /// that many threads at once. Fixed, not the thread count, so that the order, and with
 /// it every result, is the same for any number of threads. Four: two threads get two
 /// slabs each; the constraints that cross a cut (solved after the slabs, on one
-/// thread) are ~10% of the pyramid's. Below the minimum (256 lane groups) a pass takes
+/// thread) are ~13% of the pyramid's. Below the minimum (256 lane groups) a pass takes
 /// a few tens of microseconds, too short to share, and the constraints keep their exact
-/// top-down sequence.
+/// top-down sequence (dependency_level_order).
 constexpr int kSolverRegions = 4;
 constexpr std::size_t kRegionMinConstraints = 2048;
 
@@ -1085,12 +1085,17 @@ void World::solve_order() {
   // positions (the mean of their dynamic bodies') so that each holds about as many; a
   // body belongs to the slab its position falls in, a constraint to its dynamic
   // bodies' slab, or to the boundary when they lie in two. Within each slab, and in
-  // the boundary, the constraints keep their top-down sequence (region_level_order).
+  // the boundary, the constraints keep their top-down order by bands of height,
+  // coloured within a band (region_band_order).
   const std::size_t total = constraints_.size();
+  if (total < kRegionMinConstraints) {
+    dependency_level_order(constraints_, states_, solve_order_, solve_scratch_);
+    solve_starts_.clear();
+    return;
+  }
   solve_region_.assign(total, 0);
-  int regions = 1;
-  if (total >= kRegionMinConstraints) {
-    regions = kSolverRegions;
+  const int regions = kSolverRegions;
+  {
     auto moving = [&](int b) { return states_[static_cast<std::size_t>(b)].inv_mass > 0; };
     int up_axis = -1;
     if (settings_.gravity.squaredNorm() > 0) settings_.gravity.cwiseAbs().maxCoeff(&up_axis);
@@ -1139,7 +1144,32 @@ void World::solve_order() {
       solve_region_[k] = !da && !db ? 0 : !da ? rb : !db ? ra : ra == rb ? ra : regions;
     }
   }
-  region_level_order(constraints_, states_, solve_region_, regions, solve_order_, solve_starts_, solve_scratch_);
+  // Heights and band widths for region_band_order: a constraint's height is
+  // order_pairs_top_down's key (the higher of its bodies' lowest points along up);
+  // a band reaches down from its first constraint by half the height of that
+  // constraint's smaller dynamic body, so that the layers of a stack (unit boxes: 1 m
+  // apart) stay in separate bands, in their top-down order, while the side contacts
+  // and supports of one layer share a band and are coloured. Without gravity +Y
+  // serves (any order is valid; only the bands' sizes depend on it).
+  const Real g = settings_.gravity.norm();
+  const Vec3 up = g > 0 ? Vec3(-settings_.gravity / g) : Vec3::UnitY();
+  const Vec3 up_abs = up.cwiseAbs();
+  solve_height_.resize(total);
+  solve_band_.resize(total);
+  for (std::size_t k = 0; k < total; ++k) {
+    const ContactConstraint& c = constraints_[k];
+    Real height = -kInf, half = kInf;
+    for (const int b : {c.body_a, c.body_b}) {
+      const Aabb& box = broadphase_->aabb(proxies_[static_cast<std::size_t>(b)]);
+      const Real extent = up_abs.dot(box.half_extents());
+      height = std::max(height, up.dot(box.center()) - extent);
+      if (states_[static_cast<std::size_t>(b)].inv_mass > 0) half = std::min(half, extent);
+    }
+    solve_height_[k] = height;
+    solve_band_[k] = half < kInf ? half : 0;
+  }
+  region_band_order(constraints_, states_, solve_region_, regions, solve_height_, solve_band_, solve_order_,
+                    solve_starts_, solve_bits_);
 }
 
 void World::order_pairs_top_down() {

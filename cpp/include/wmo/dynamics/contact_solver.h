@@ -298,16 +298,27 @@ void dependency_level_order(const std::vector<ContactConstraint>& cs, const std:
 /// regions on several threads: `region[k]` (0 .. regions) is constraint k's region,
 /// where regions 0 .. regions - 1 must share no dynamic body (the caller partitions the
 /// bodies and gives a constraint the region of its dynamic bodies) and `regions` is the
-/// boundary, the constraints whose dynamic bodies lie in different regions. Each
-/// region's constraints keep their given sequence in dependency_level_order's form;
-/// the boundary comes last. `starts` receives regions + 2 offsets: region r is
-/// order[starts[r], starts[r + 1]), the boundary order[starts[regions], end). Gauss-
-/// Seidel passes in this order compute what passes over the given sequence with every
-/// boundary constraint moved to its end compute; the regions commute. `scratch` is
-/// reused storage. O(constraints + bodies).
-void region_level_order(const std::vector<ContactConstraint>& cs, const std::vector<BodyState>& states,
-                        const std::vector<int>& region, int regions, std::vector<int>& order,
-                        std::vector<int>& starts, std::vector<int>& scratch);
+/// boundary, the constraints whose dynamic bodies lie in different regions, last.
+/// `starts` receives regions + 2 offsets: region r is order[starts[r], starts[r + 1]),
+/// the boundary order[starts[regions], end).
+///
+/// Within a region (and the boundary) the constraints, which must come sorted by
+/// height, highest first (World's top-down sequence), are cut into bands of
+/// near-equal height and coloured within each band: `height[k]` is constraint k's
+/// height (m, along up) and `band[k]`, for the constraint that opens a band, how far
+/// below it others may lie and still join it (m). Each takes the lowest colour (0..63)
+/// that no earlier constraint of its band with one of its dynamic bodies has; the
+/// order is band by band, colour by colour, stable within a colour. So a stack's
+/// layers keep the top-down order that carries its weight to the ground within one
+/// Gauss-Seidel pass, while within a layer the constraints of one colour share no
+/// dynamic body and fill WideContacts' groups. (A region in the exact sequence's
+/// dependency levels, whose levels on a wide pile hold a few constraints each, left
+/// the pyramid's groups a fifth emptier.) `scratch` is reused storage.
+/// O(constraints log constraints + bodies).
+void region_band_order(const std::vector<ContactConstraint>& cs, const std::vector<BodyState>& states,
+                       const std::vector<int>& region, int regions, const std::vector<Real>& height,
+                       const std::vector<Real>& band, std::vector<int>& order, std::vector<int>& starts,
+                       std::vector<std::uint64_t>& scratch);
 
 /// Threads for WideContacts' passes (World's ThreadPool implements it): run(fn) calls
 /// fn(t) for every t in [0, size()) concurrently, t = 0 on the calling thread, and
@@ -352,7 +363,7 @@ class WideContacts {
   /// stiffening (SolverSettings::max_sag) from its load, as prepare_contacts does; the
   /// defaults leave every point at 1. `centroid_rows` prepares the centroid rows (each
   /// set_motion then computes what they read); solve may run them only if it is set.
-  /// `starts` (optional, from region_level_order): offsets into `order` where a region
+  /// `starts` (optional, from region_band_order): offsets into `order` where a region
   /// begins, the last one the boundary's; no group spans two regions, and with a team
   /// (set_team) the regions run at once (see there).
   void build(const std::vector<ContactConstraint>& cs, const std::vector<int>& order,
@@ -408,9 +419,12 @@ class WideContacts {
     int points = 0;           ///< largest point count among the lanes
     bool friction = false;    ///< some lane has friction
     bool stiffened = false;   ///< some point has stiffening > 1 (SolverSettings::max_sag)
-    /// Bit l set where lane l's body A (B) moves: only those rows are written back (a
-    /// static or kinematic body's row, which several groups may share, is only read).
-    std::uint8_t moves_a = 0, moves_b = 0;
+    /// Where lane l's velocities of A (B) are written back: its body's row if the body
+    /// moves, else a sink row of the group's region that nothing reads. A static or
+    /// kinematic body's row, which groups running at once may share, is only read, and
+    /// the write stays unconditional (a branch per lane cost the pyramid's passes a
+    /// fifth of their time).
+    std::array<int, kLanes> write_a{}, write_b{};
     alignas(32) float inv_mass_a[kLanes] = {}, inv_mass_b[kLanes] = {};
     /// World inverse inertia (at the step's start, or as refresh_inertia last set it),
     /// symmetric: xx, yy, zz, xy, xz, yz.
@@ -487,6 +501,10 @@ class WideContacts {
   void unpack_groups(std::vector<ContactConstraint>& cs, int begin, int end) const;
   ParallelTeam* team_ = nullptr;
   std::vector<int> region_start_;  ///< see region_count
+  // build's scratch: per position in the order, placed in a group yet; per state, the
+  // last group it joined and the last group that passed over a constraint of it.
+  std::vector<std::uint8_t> placed_;
+  std::vector<int> in_group_, passed_over_;
 };
 
 }  // namespace wmo

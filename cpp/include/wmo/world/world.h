@@ -743,10 +743,11 @@ class World {
   std::vector<ManifoldKey> constraint_keys_;
   std::vector<ManifoldGeometry> constraint_geometry_;  ///< per constraint, for the cache
   std::vector<int> constraint_entries_;  ///< per constraint (NarrowphaseOut::entries)
-  /// The order the solver visits constraints_ in (solve_order: region_level_order),
-  /// its regions' starts, each constraint's region and scratch.
+  /// The order the solver visits constraints_ in (solve_order), its regions' starts
+  /// (empty: none), what region_band_order reads, and scratch.
   std::vector<int> solve_order_, solve_starts_, solve_region_, solve_scratch_;
-  std::vector<Real> solve_coord_;
+  std::vector<Real> solve_coord_, solve_height_, solve_band_;
+  std::vector<std::uint64_t> solve_bits_;
   WideContacts wide_;  ///< the solver's lane-grouped copy of constraints_ (contact_solver.h)
   // Scratch of order_pairs_top_down (kept to avoid allocating every step).
   std::vector<std::uint64_t> order_scratch_;
