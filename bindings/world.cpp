@@ -248,7 +248,7 @@ gyroscopic : integrate the gyroscopic term (default False): rotations keep the w
     about the intermediate axis flips; without it the angular velocity is constant in
     free flight (and a non-spherical body's energy changes as it turns).
 threads : threads for the parallel stages, the caller's included (default 1): the
-    narrowphase, and on a pile of at least 2,048 contact constraints the solver's
+    narrowphase, and on a pile of at least 8,192 contact constraints the solver's
     passes. Results are bit-identical for any count.
 sleeping : put resting islands to sleep (default True): an island whose bodies all move
     slower than sleep_linear_threshold (m/s, default 0.05) and sleep_angular_threshold

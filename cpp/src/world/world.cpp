@@ -1073,11 +1073,13 @@ void World::integrate_position(int i, BodyState& s, std::uint8_t f, Real h, cons
 /// that many threads at once. Fixed, not the thread count, so that the order, and with
 /// it every result, is the same for any number of threads. Four: two threads get two
 /// slabs each; the constraints that cross a cut (solved after the slabs, on one
-/// thread) are ~13% of the pyramid's. Below the minimum (256 lane groups) a pass takes
-/// a few tens of microseconds, too short to share, and the constraints keep their exact
-/// top-down sequence (dependency_level_order).
+/// thread) are ~13% of the pyramid's (~20,000 constraints). Below the minimum the
+/// constraints keep their exact top-down sequence (dependency_level_order): on
+/// boxes3000's ragged pile (4,000-5,000 constraints at its busiest) the banded order
+/// left the lane groups emptier and cost the single-thread solve ~10% (measured
+/// against the exact order at 2,048), more than a second thread wins back there.
 constexpr int kSolverRegions = 4;
-constexpr std::size_t kRegionMinConstraints = 2048;
+constexpr std::size_t kRegionMinConstraints = 8192;
 
 void World::solve_order() {
   // Slabs along the horizontal axis (world X, Y or Z, not the one nearest to up) over

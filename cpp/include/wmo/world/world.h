@@ -246,7 +246,7 @@ struct WorldSettings {
   bool gyroscopic = false;
   BroadphaseType broadphase = BroadphaseType::kAabbTree;
   /// Threads for the step's parallel stages, the caller's included: the narrowphase,
-  /// and on a pile of at least 2,048 contact constraints the solver's passes (its
+  /// and on a pile of at least 8,192 contact constraints the solver's passes (its
   /// four regions at once, then the constraints between them; World::solve_order).
   /// Results are bit-identical for any count: work is split into fixed parts and
   /// joined in order, and the solver's regions do not depend on the count. 1 (the
