@@ -27,9 +27,6 @@
 #include <cmath>
 #include <cstring>
 #include <thread>
-#include <chrono>
-#include <cstdio>
-#include <cstdlib>
 
 #include "wmo/dynamics/contact_solver.h"
 
@@ -166,8 +163,6 @@ WMO_INLINE Bodies gather_velocities(const std::array<int, L>& idx, const Row* ro
   return Bodies{V3{c[0], c[1], c[2]}, V3{c[3], c[4], c[5]}};
 }
 
-/// Velocities back. Lanes that share a body that does not move (static, kinematic, the
-/// padding row) write the same unchanged values.
 /// Writes each lane's velocities to its row in `idx` (Group::write_a / write_b: a sink
 /// row for the lanes of static, kinematic and padding bodies, which the rows change by
 /// exact zeros).
@@ -513,9 +508,9 @@ constexpr int kParallelMinGroups = 64;
 constexpr int kLookahead = 32;
 
 /// All threads of a team wait here until every one has arrived; what each wrote
-/// before is then visible to all. Spins (the batches between two barriers are a few
-/// microseconds of work), then yields, so a thread the system has descheduled is
-/// not spun against indefinitely.
+/// before is then visible to all. Spins (a pass's regions take a few hundred
+/// microseconds on a large pile), then yields, so a thread the system has descheduled
+/// is not spun against indefinitely.
 class SpinBarrier {
  public:
   explicit SpinBarrier(int threads) : threads_(threads) {}
@@ -543,9 +538,8 @@ class SpinBarrier {
   std::atomic<unsigned> generation_{0};
 };
 
-}  // namespace
-
-namespace {
+/// region_band_order's per-thread scratch: the bodies whose colour masks to clear at
+/// a band's end, and a band's constraints while they are sorted by colour.
 std::vector<int>& scratch_touched() {
   thread_local std::vector<int> v;
   return v;
@@ -554,6 +548,7 @@ std::vector<int>& scratch_buffer() {
   thread_local std::vector<int> v;
   return v;
 }
+
 }  // namespace
 
 void region_band_order(const std::vector<ContactConstraint>& cs, const std::vector<BodyState>& states,
@@ -565,7 +560,7 @@ void region_band_order(const std::vector<ContactConstraint>& cs, const std::vect
   const std::size_t total = cs.size(), bodies = states.size();
   scratch.assign(bodies + total / 8 + 1, 0);
   std::uint64_t* used = scratch.data();
-  std::uint64_t* key = used + bodies;
+  std::uint8_t* colour_of = reinterpret_cast<std::uint8_t*>(used + bodies);
   starts.assign(static_cast<std::size_t>(regions) + 2, 0);
   for (std::size_t k = 0; k < total; ++k) ++starts[static_cast<std::size_t>(region[k]) + 1];
   for (int r = 0; r <= regions; ++r) starts[static_cast<std::size_t>(r) + 1] += starts[static_cast<std::size_t>(r)];
@@ -578,7 +573,6 @@ void region_band_order(const std::vector<ContactConstraint>& cs, const std::vect
   std::vector<int>& touched = scratch_touched();
   std::vector<int>& buffer = scratch_buffer();
   std::array<int, 65> bucket;
-  std::uint8_t* colour_of = reinterpret_cast<std::uint8_t*>(key);  // one byte a constraint, by index
   auto sort_band = [&](int begin, int end) {
     bucket.fill(0);
     for (int q = begin; q < end; ++q) ++bucket[colour_of[order[static_cast<std::size_t>(q)]] + 1u];
