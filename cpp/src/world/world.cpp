@@ -1095,12 +1095,17 @@ void World::solve_order() {
     solve_starts_.clear();
     return;
   }
-  solve_region_.assign(total, 0);
+  // Up (-gravity; +Y without gravity, where any order is valid and only the bands'
+  // sizes depend on it) for both the slabs' axis and the bands' heights.
+  const Real g = settings_.gravity.norm();
+  const Vec3 up = g > 0 ? Vec3(-settings_.gravity / g) : Vec3::UnitY();
+  const Vec3 up_abs = up.cwiseAbs();
+  solve_region_.resize(total);
   const int regions = kSolverRegions;
   {
     auto moving = [&](int b) { return states_[static_cast<std::size_t>(b)].inv_mass > 0; };
     int up_axis = -1;
-    if (settings_.gravity.squaredNorm() > 0) settings_.gravity.cwiseAbs().maxCoeff(&up_axis);
+    if (g > 0) up_abs.maxCoeff(&up_axis);
     Vec3 lo = Vec3::Constant(kInf), hi = Vec3::Constant(-kInf);
     for (const ContactConstraint& c : constraints_)
       for (const int b : {c.body_a, c.body_b})
@@ -1151,11 +1156,7 @@ void World::solve_order() {
   // a band reaches down from its first constraint by half the height of that
   // constraint's smaller dynamic body, so that the layers of a stack (unit boxes: 1 m
   // apart) stay in separate bands, in their top-down order, while the side contacts
-  // and supports of one layer share a band and are coloured. Without gravity +Y
-  // serves (any order is valid; only the bands' sizes depend on it).
-  const Real g = settings_.gravity.norm();
-  const Vec3 up = g > 0 ? Vec3(-settings_.gravity / g) : Vec3::UnitY();
-  const Vec3 up_abs = up.cwiseAbs();
+  // and supports of one layer share a band and are coloured.
   solve_height_.resize(total);
   solve_band_.resize(total);
   for (std::size_t k = 0; k < total; ++k) {
