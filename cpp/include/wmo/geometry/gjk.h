@@ -646,7 +646,7 @@ struct EpaFace {
   Vec3 n;                       // outward unit normal
   Real d;                       // n . v0: distance of the plane from the origin
   bool obsolete;
-  bool in_heap;
+  bool candidate;
 };
 
 // Per-thread buffers: they grow to the sizes the settings ask for once, then are reused,
@@ -655,7 +655,15 @@ struct EpaWorkspace {
   std::vector<Vec3> w, a, b;
   std::vector<EpaFace> faces;
   std::vector<int> free_faces;
-  std::vector<std::pair<Real, int>> heap;  // (distance, face), min-heap
+  // Per face slot: its distance while it is a candidate for expansion, +inf otherwise
+  // (obsolete, free, or pruned beyond the upper bound). The closest face is found by a
+  // branch-free scan of this array (Epa::pop_closest), not a binary heap: EPA's
+  // polytopes hold tens to a few hundred faces, and the heap's push and pop cost one
+  // unpredictable comparison per level (measured, EPA alone on the narrowphase
+  // benchmark's configurations: deep box-box 1969 -> 1668 ns, hull-hull 3866 -> 3241,
+  // cylinder-box 5726 -> 5019, best of five alternating runs). A face that becomes
+  // obsolete leaves the candidates at once, and its slot is free for reuse.
+  std::vector<Real> key;
   // (face, edge) pairs packed as face * 4 + edge: one 4-byte store and load per entry
   // (a pair written as two ints and read back as one 8-byte load stalls the store
   // buffer, which was a tenth of EPA's time on cylinders).
@@ -695,12 +703,12 @@ class Epa {
     ws_.b.clear();
     ws_.faces.clear();
     ws_.free_faces.clear();
-    ws_.heap.clear();
+    ws_.key.clear();
     ws_.w.reserve(max_verts_);
     ws_.a.reserve(max_verts_);
     ws_.b.reserve(max_verts_);
     ws_.faces.reserve(max_faces_);
-    ws_.heap.reserve(max_faces_);
+    ws_.key.reserve(max_faces_);
   }
 
   EpaResult run(const GjkResult& g) {
@@ -932,6 +940,7 @@ class Epa {
     } else if (static_cast<int>(ws_.faces.size()) < max_faces_) {
       f = static_cast<int>(ws_.faces.size());
       ws_.faces.emplace_back();
+      ws_.key.push_back(kInf);
     } else {
       return -1;
     }
@@ -943,7 +952,7 @@ class Epa {
     // Plane distance from the centroid: the average cancels part of the round-off.
     F.d = n.dot(ws_.w[i0] + ws_.w[i1] + ws_.w[i2]) / 3;
     F.obsolete = false;
-    F.in_heap = false;
+    F.candidate = false;
     return f;
   }
 
@@ -954,19 +963,37 @@ class Epa {
     ws_.faces[g].adj_edge[h] = e;
   }
 
-  void heap_push(int f, Real upper) {
+  void add_candidate(int f, Real upper) {
     EpaFace& F = ws_.faces[f];
     // Faces beyond the best upper bound can never be the answer (van den Bergen 2001);
     // the flat tolerance keeps a face that is there only by round-off.
     if (F.d > upper + flat_tol()) return;
-    F.in_heap = true;
-    ws_.heap.emplace_back(F.d, f);
-    std::push_heap(ws_.heap.begin(), ws_.heap.end(), std::greater<>());
+    F.candidate = true;
+    ws_.key[static_cast<std::size_t>(f)] = F.d;
+  }
+
+  // The candidate face closest to the origin (ties: the lowest slot), taken out of the
+  // candidates; -1 if there is none.
+  int pop_closest() {
+    const Real* key = ws_.key.data();
+    const int n = static_cast<int>(ws_.key.size());
+    int f = -1;
+    Real best = kInf;
+    for (int i = 0; i < n; ++i) {
+      const bool closer = key[i] < best;
+      best = closer ? key[i] : best;
+      f = closer ? i : f;
+    }
+    if (f >= 0) {
+      ws_.key[static_cast<std::size_t>(f)] = kInf;
+      ws_.faces[f].candidate = false;
+    }
+    return f;
   }
 
   void release(int f) {
     EpaFace& F = ws_.faces[f];
-    if (F.obsolete && !F.in_heap) ws_.free_faces.push_back(f);
+    if (F.obsolete && !F.candidate) ws_.free_faces.push_back(f);
   }
 
   bool build_tetrahedron() {
@@ -992,7 +1019,7 @@ class Epa {
     link(f[1], 1, f[2], 2);
     link(f[1], 2, f[3], 0);
     link(f[2], 1, f[3], 1);
-    for (int k = 0; k < 4; ++k) heap_push(f[k], kInf);
+    for (int k = 0; k < 4; ++k) add_candidate(f[k], kInf);
     return true;
   }
 
@@ -1039,7 +1066,7 @@ class Epa {
     // The origin's projection on the face's plane.
     const Vec3 p = F.d * F.n;
     // A - B often has coplanar faces (box against box), which EPA splits into triangles
-    // of equal distance; the heap may pop one that does not contain the projection.
+    // of equal distance; the scan may pick one that does not contain the projection.
     // Walk across edges to coplanar neighbours until the triangle holds it, so the
     // witness points satisfy point_a - point_b = depth * normal.
     int g = f;
@@ -1166,19 +1193,7 @@ class Epa {
     const int max_it = std::max(st_.max_iterations, 1);
     for (int it = 0;; ++it) {
       // Closest live face.
-      int f = -1;
-      while (!ws_.heap.empty()) {
-        std::pop_heap(ws_.heap.begin(), ws_.heap.end(), std::greater<>());
-        const int g = ws_.heap.back().second;
-        ws_.heap.pop_back();
-        ws_.faces[g].in_heap = false;
-        if (ws_.faces[g].obsolete) {
-          release(g);
-          continue;
-        }
-        f = g;
-        break;
-      }
+      const int f = pop_closest();
       if (f < 0) {
         // Every face pruned or gone: only round-off can do this.
         return pending.valid ? capped(lower(pending)) : degenerate_answer();
@@ -1249,6 +1264,8 @@ class Epa {
           continue;
         }
         G.obsolete = true;
+        G.candidate = false;
+        ws_.key[static_cast<std::size_t>(g)] = kInf;
         ws_.created.push_back(g);  // reused below as the list of removed faces
         const int e2 = (e + 2) % 3, e1 = (e + 1) % 3;
         ws_.stack.push_back(G.adj[e2] * 4 + G.adj_edge[e2]);
@@ -1296,7 +1313,7 @@ class Epa {
         if (match < 0) return fallback();
         link(fk, 1, match, 2);
       }
-      for (int k = 0; k < h; ++k) heap_push(ws_.created[k], upper);
+      for (int k = 0; k < h; ++k) add_candidate(ws_.created[k], upper);
     }
   }
 };
