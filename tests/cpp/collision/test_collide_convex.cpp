@@ -127,6 +127,41 @@ TEST(CollideConvexGeneric, SphereOnBoxGivesOnePoint) {
   EXPECT_LT((m.points[0].point_a - Vec3(0.2, 0.3, 1)).norm(), kEpaTol);
 }
 
+TEST(CollideConvexGeneric, SphereContactIsTheEpaPointWithOneIdOnEveryFace) {
+  // A sphere meets anything at one point: the generic manifold is exactly the GJK /
+  // EPA answer (no clipping), on either side of the pair, with the same feature id
+  // whichever face, edge or corner of the other shape it touches.
+  const Box box(Vec3(1, 1, 1));
+  const Sphere ball(0.5);
+  const Vec3 centres[] = {Vec3(1.4, 0.2, 0.1), Vec3(0.1, 1.4, -0.2), Vec3(1.25, 1.25, 0.3),
+                          Vec3(1.2, -1.2, 1.2), Vec3(0.3, 0.2, 0.1)};  // faces, edge, corner, inside
+  std::vector<std::uint32_t> ids;
+  for (const Vec3& c : centres) {
+    for (const bool ball_first : {false, true}) {
+      const Pose box_to_ball(c, axis_angle(0.3, Vec3(1, 2, 3)));
+      const Pose b_in_a = ball_first ? box_to_ball.inverse() : box_to_ball;
+      const ConvexShape& a = ball_first ? static_cast<const ConvexShape&>(ball) : box;
+      const ConvexShape& b = ball_first ? static_cast<const ConvexShape&>(box) : ball;
+      Manifold m;
+      ASSERT_TRUE(collide_convex_convex(a, b, b_in_a, generic_settings(), m));
+      check_conventions(m, kTol);
+      ASSERT_EQ(m.count, 1);
+      const DistanceResult r = penetration_convex_convex(a, b, b_in_a, GjkSettings{}, EpaSettings{}, 0);
+      EXPECT_EQ(m.points[0].depth, -r.distance);
+      EXPECT_EQ(m.normal, r.normal);
+      EXPECT_EQ(m.points[0].point_a, r.point_a);
+      ids.push_back(m.points[0].feature_id);
+    }
+  }
+  for (const std::uint32_t id : ids) EXPECT_EQ(id, ids.front());
+  // Within a speculative margin: the one point, at its negative depth.
+  Manifold m;
+  ASSERT_TRUE(collide_convex_convex(box, ball, Pose(Vec3(0, 0, 1.55)), generic_settings(0.1), m));
+  ASSERT_EQ(m.count, 1);
+  EXPECT_NEAR(m.points[0].depth, -0.05, kTol);
+  EXPECT_FALSE(collide_convex_convex(box, ball, Pose(Vec3(0, 0, 1.65)), generic_settings(0.1), m));
+}
+
 TEST(CollideConvexGeneric, CylinderStandingOnBoxGivesFourPoints) {
   const Box a(Vec3(2, 1, 2));
   const Cylinder c(0.5, 0.5);

@@ -34,6 +34,7 @@
 #include <cfloat>
 #include <cmath>
 #include <cstdint>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -70,7 +71,11 @@ inline Vec3 cross3(const Vec3& a, const Vec3& b) {
 }
 
 /// Sign with sign(0) = +1 (a definite vertex for a zero component, as in shapes.cpp).
-inline Real sign_or_plus(Real x) { return x < 0 ? Real(-1) : Real(1); }
+/// Arithmetic on the comparison rather than a choice, so that it compiles without a
+/// branch wherever it is inlined: a box's support along GJK's and EPA's directions
+/// takes either sign at random, and where GCC made the choice a branch it was
+/// mispredicted half the time (sphere-box GJK 1.3-1.5x slower in one build).
+inline Real sign_or_plus(Real x) { return Real(1) - Real(2) * static_cast<Real>(x < 0); }
 
 }  // namespace detail
 
@@ -414,7 +419,14 @@ struct MinkowskiSupport {
   // 800 -> 703 ns; EPA unchanged).
   Vec3 operator()(const Vec3& d, Vec3& pa, Vec3& pb) const {
     pa = sa(d);
-    pb = to_a(sb(-to_b(d)));
+    if constexpr (std::is_same_v<SB, CoreSupport<Sphere>>) {
+      // A sphere's core is its centre: R 0 + t = t, bit for bit (R is finite), and
+      // without the products GJK on two spheres folds to a few operations (72 -> 13
+      // ns a query; the products on zeros kept it an out-of-line call).
+      pb = t;
+    } else {
+      pb = to_a(sb(-to_b(d)));
+    }
     return pa - pb;
   }
   Vec3 support_b(const Vec3& d) const { return to_a(sb(to_b(d))); }
