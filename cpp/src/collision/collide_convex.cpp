@@ -89,7 +89,7 @@ bool collide_convex_convex(const ConvexShape& a, const ConvexShape& b, const Pos
   b.supporting_face(b_in_a.inverse_transform_vector(-N), fb);
   for (int k = 0; k < fb.count; ++k) fb.vertices[k] = b_in_a.transform_point(fb.vertices[k]);
 
-  ContactPoint pts[clip::kMaxClipVertices + 1];
+  ContactScratch<clip::kMaxClipVertices + 1> pts;
   int n = 0;
   const std::uint32_t feat = ((fa.feature & 255u) << 24) | ((fb.feature & 255u) << 16);
   if (fa.count >= 2 && fb.count >= 2) {
@@ -97,10 +97,10 @@ bool collide_convex_convex(const ConvexShape& a, const ConvexShape& b, const Pos
     const bool ref_on_a = ca >= cb;
     if (ref_on_a)
       n = clip::clip_features(fa.vertices.data(), fa.count, true, fb.vertices.data(), fb.count, N,
-                              0, 0, margin, feat, pts);
+                              0, 0, margin, feat, pts.data());
     else
       n = clip::clip_features(fb.vertices.data(), fb.count, false, fa.vertices.data(), fa.count, N,
-                              0, 0, margin, feat | (1u << 12), pts);
+                              0, 0, margin, feat | (1u << 12), pts.data());
   }
   // No point can be deeper than the EPA depth: translating B by depth0 along N makes
   // the shapes touch, so every point of B is then out of A. A clipped point measured
@@ -129,7 +129,7 @@ bool collide_convex_convex(const ConvexShape& a, const ConvexShape& b, const Pos
     pts[n++] = ContactPoint{pa, pa - depth0 * N, depth0, feat | clip::kFallbackLabel};
   }
   m.normal = N;
-  reduce_to_4(pts, n, N, m);
+  reduce_to_4(pts.data(), n, N, m);
   return m.count > 0;
 }
 

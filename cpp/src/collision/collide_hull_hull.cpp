@@ -533,8 +533,8 @@ bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_i
     ni = face_polygon(a, inc_face, nullptr, inc);
   }
   const std::uint32_t id_base = clip::face_contact_id(!ref_on_a, ref_face, inc_face);
-  ContactPoint pts[clip::kMaxClipVertices + 1];
-  int n = clip::clip_features(ref, nr, ref_on_a, inc, ni, N, 0, 0, margin, id_base, pts);
+  ContactScratch<clip::kMaxClipVertices + 1> pts;
+  int n = clip::clip_features(ref, nr, ref_on_a, inc, ni, N, 0, 0, margin, id_base, pts.data());
   // The deepest point, if the clip lost it (clip::kDeepestPointTolerance).
   Real max_clip = -kInf;
   for (int k = 0; k < n; ++k) max_clip = std::max(max_clip, pts[k].depth);
@@ -547,7 +547,7 @@ bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_i
   }
   if (n == 0) return false;
   m.normal = N;
-  reduce_to_4(pts, n, N, m);
+  reduce_to_4(pts.data(), n, N, m);
   return true;
 }
 

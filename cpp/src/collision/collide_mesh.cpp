@@ -485,7 +485,7 @@ void collide_triangle(const MeshContext& ctx, int t, std::vector<Manifold>& out)
   for (int k = 0; k < nb; ++k) fb[k] = ctx.rot * face.vertices[k] + ctx.b_in_a.position;
   const std::uint32_t fid = face.feature << 14;
 
-  std::array<ContactPoint, kMaxClip + kRimPoints> pts;
+  ContactScratch<kMaxClip + kRimPoints> pts;
   int np = 0;
   Manifold m;
   m.normal = N;

@@ -185,7 +185,7 @@ bool collide_plane_convex(const Plane& a, const ConvexShape& b, const Pose& b_in
         b.supporting_face(-n_b, face);
       }
       const Real deepest_depth = offset_b - n_b.dot(deepest);
-      ContactPoint pts[kMaxFaceVertices + 1];
+      ContactScratch<kMaxFaceVertices + 1> pts;
       int count = 0;
       Real face_best = -kInf;
       const int nv = std::min(face.count, kMaxFaceVertices);
@@ -207,7 +207,7 @@ bool collide_plane_convex(const Plane& a, const ConvexShape& b, const Pose& b_in
       }
       if (count == 0) return false;
       begin();
-      reduce_to_4(pts, count, n, m);
+      reduce_to_4(pts.data(), count, n, m);
       return true;
     }
   }

@@ -13,9 +13,24 @@
 // result is deterministic for a deterministic input order. No allocation.
 #pragma once
 
+#include <cstddef>
+#include <new>
+
 #include "wmo/types.h"
 
 namespace wmo {
+
+/// Scratch room for up to N contact points that a routine writes (points 0..n-1)
+/// before it reads them. Not initialised: a `ContactPoint pts[65]` array sets its 65
+/// points to zero (4 KB) on every call, which the generic path, hull-hull and the
+/// mesh's per-triangle manifolds paid each time. ContactPoint is an aggregate, so the
+/// byte array provides its objects implicitly (C++20, P0593).
+template <int N>
+struct ContactScratch {
+  alignas(ContactPoint) std::byte raw[N * sizeof(ContactPoint)];
+  ContactPoint* data() { return std::launder(reinterpret_cast<ContactPoint*>(raw)); }
+  ContactPoint& operator[](int i) { return data()[i]; }
+};
 
 /// Writes into out.points / out.count the (at most kMaxManifoldPoints) points of
 /// pts[0..n) chosen as described above; out.normal, child_a and child_b are left as
