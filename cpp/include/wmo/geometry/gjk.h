@@ -1029,11 +1029,13 @@ class Epa {
       best = closer ? key[i] : best;
       f = closer ? i : f;
     }
-    if (f >= 0) {
-      ws_.key[static_cast<std::size_t>(f)] = kInf;
-      ws_.faces[f].candidate = false;
-    }
+    if (f >= 0) drop_candidate(f);
     return f;
+  }
+
+  void drop_candidate(int f) {
+    ws_.faces[f].candidate = false;
+    ws_.key[static_cast<std::size_t>(f)] = kInf;
   }
 
   void release(int f) {
@@ -1309,8 +1311,7 @@ class Epa {
           continue;
         }
         G.obsolete = true;
-        G.candidate = false;
-        ws_.key[static_cast<std::size_t>(g)] = kInf;
+        drop_candidate(g);
         ws_.created.push_back(g);  // reused below as the list of removed faces
         const int e2 = (e + 2) % 3, e1 = (e + 1) % 3;
         ws_.stack.push_back(G.adj[e2] * 4 + G.adj_edge[e2]);
