@@ -68,6 +68,12 @@ bool collide_convex_convex(const ConvexShape& a, const ConvexShape& b, const Pos
     N = len > 0 ? Vec3(b_in_a.position / len) : Vec3::UnitX();
   }
   const Real depth0 = -r.distance;
+  // The GJK / EPA point (on A, at the EPA depth) with feature id `id`.
+  auto epa_point = [&](std::uint32_t id) {
+    Vec3 pa = r.point_a;
+    if (!pa.allFinite()) pa = Vec3::Zero();
+    return ContactPoint{pa, pa - depth0 * N, depth0, id};
+  };
   // A sphere meets anything at one point: its supporting feature along any direction is
   // that point, so there is nothing to clip, and the GJK / EPA point is the manifold
   // (step 5 below would add the same point after two supporting features, two
@@ -76,11 +82,9 @@ bool collide_convex_convex(const ConvexShape& a, const ConvexShape& b, const Pos
   // alone, constant, as Box2D's and Jolt's one-point sphere contacts keep theirs, so a
   // sphere rolling from one face of a hull onto the next keeps its warm start.
   if (a.type() == ShapeType::kSphere || b.type() == ShapeType::kSphere) {
-    Vec3 pa = r.point_a;
-    if (!pa.allFinite()) pa = Vec3::Zero();
     m.normal = N;
-    m.count = 0;
-    m.add(pa, pa - depth0 * N, depth0, clip::kFallbackLabel);
+    m.count = 1;
+    m.points[0] = epa_point(clip::kFallbackLabel);
     return true;
   }
 
@@ -123,11 +127,7 @@ bool collide_convex_convex(const ConvexShape& a, const ConvexShape& b, const Pos
   // whose clipped depth equals the EPA depth up to EPA's error gets no extra point,
   // far below a depth difference that matters (an edge-edge contact's clipped points
   // are shallower than the crossing point by a fraction of the shapes' size).
-  if (n == 0 || max_clip < depth0 - 1e-6 * size) {
-    Vec3 pa = r.point_a;
-    if (!pa.allFinite()) pa = Vec3::Zero();
-    pts[n++] = ContactPoint{pa, pa - depth0 * N, depth0, feat | clip::kFallbackLabel};
-  }
+  if (n == 0 || max_clip < depth0 - 1e-6 * size) pts[n++] = epa_point(feat | clip::kFallbackLabel);
   m.normal = N;
   reduce_to_4(pts.data(), n, N, m);
   return m.count > 0;

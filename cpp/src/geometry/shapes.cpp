@@ -17,24 +17,9 @@ namespace wmo {
 
 namespace {
 
-// Squared length below which a direction counts as zero. Directions come from GJK and
-// from contact normals, both of order 1 or larger in length; a length of 1e-150 is far
-// below anything meaningful yet its square stays a normal double (no underflow).
-constexpr Real kTinyDirSq = 1e-300;
-
-// Unit vector along `dir`, or +X when `dir` is zero or not finite. The header lets any
-// point of the shape be returned for a zero direction; we return the point along +X so
-// results stay deterministic and finite.
-Vec3 unit_or_x(const Vec3& dir) {
-  const Real n2 = dir.squaredNorm();
-  if (!(n2 > kTinyDirSq) || !std::isfinite(n2)) return Vec3::UnitX();
-  return dir / std::sqrt(n2);
-}
-
-// Sign with sign(0) = +1, so a support map picks a definite vertex for a zero component.
-// Without a branch, as detail::sign_or_plus in gjk.h (a support direction's signs are
-// random, a branch on them is mispredicted half the time).
-Real sign_or_plus(Real x) { return Real(1) - Real(2) * static_cast<Real>(x < 0); }
+using detail::kTinyDirSq;
+using detail::sign_or_plus;
+using detail::unit_or_x;
 
 std::string fmt(Real x) {
   std::ostringstream s;

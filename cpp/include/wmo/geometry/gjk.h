@@ -50,17 +50,8 @@ namespace wmo {
 
 namespace detail {
 
-// Squared length below which a direction counts as zero: the same threshold as the
-// shapes' own support maps (shapes.cpp), so a decorated support agrees with
-// ConvexShape::support bit for bit on ordinary input.
-constexpr Real kTinyDirSq = 1e-300;
-
-/// dir / |dir|, or +X for a zero or non-finite direction (the shapes' convention).
-inline Vec3 unit_or_x(const Vec3& dir) {
-  const Real n2 = dir.squaredNorm();
-  if (!(n2 > kTinyDirSq) || !std::isfinite(n2)) return Vec3::UnitX();
-  return dir / std::sqrt(n2);
-}
+// kTinyDirSq, unit_or_x and sign_or_plus (shapes.h) are the shapes' own, so a decorated
+// support agrees with ConvexShape::support bit for bit on ordinary input.
 
 /// a x b, written out. The same formula as Eigen's cross (so the same bits), which GCC
 /// left as an out-of-line call in GJK's and EPA's loops (7% of EPA's samples on
@@ -69,13 +60,6 @@ inline Vec3 unit_or_x(const Vec3& dir) {
 inline Vec3 cross3(const Vec3& a, const Vec3& b) {
   return Vec3(a.y() * b.z() - a.z() * b.y(), a.z() * b.x() - a.x() * b.z(), a.x() * b.y() - a.y() * b.x());
 }
-
-/// Sign with sign(0) = +1 (a definite vertex for a zero component, as in shapes.cpp).
-/// Arithmetic on the comparison rather than a choice, so that it compiles without a
-/// branch wherever it is inlined: a box's support along GJK's and EPA's directions
-/// takes either sign at random, and where GCC made the choice a branch it was
-/// mispredicted half the time (sphere-box GJK 1.3-1.5x slower in one build).
-inline Real sign_or_plus(Real x) { return Real(1) - Real(2) * static_cast<Real>(x < 0); }
 
 }  // namespace detail
 
@@ -691,7 +675,6 @@ struct EpaFace {
   Vec3 n;                       // outward unit normal
   Real d;                       // n . v0: distance of the plane from the origin
   bool obsolete;
-  bool candidate;
 };
 
 // Per-thread buffers: they grow to the sizes the settings ask for once, then are reused,
@@ -997,7 +980,6 @@ class Epa {
     // Plane distance from the centroid: the average cancels part of the round-off.
     F.d = n.dot(ws_.w[i0] + ws_.w[i1] + ws_.w[i2]) / 3;
     F.obsolete = false;
-    F.candidate = false;
     return f;
   }
 
@@ -1013,7 +995,6 @@ class Epa {
     // Faces beyond the best upper bound can never be the answer (van den Bergen 2001);
     // the flat tolerance keeps a face that is there only by round-off.
     if (F.d > upper + flat_tol()) return;
-    F.candidate = true;
     ws_.key[static_cast<std::size_t>(f)] = F.d;
   }
 
@@ -1033,14 +1014,14 @@ class Epa {
     return f;
   }
 
-  void drop_candidate(int f) {
-    ws_.faces[f].candidate = false;
-    ws_.key[static_cast<std::size_t>(f)] = kInf;
-  }
+  void drop_candidate(int f) { ws_.key[static_cast<std::size_t>(f)] = kInf; }
+
+  // A face is a candidate while its key is finite (new and freed slots hold +inf).
+  bool is_candidate(int f) const { return ws_.key[static_cast<std::size_t>(f)] < kInf; }
 
   void release(int f) {
     EpaFace& F = ws_.faces[f];
-    if (F.obsolete && !F.candidate) ws_.free_faces.push_back(f);
+    if (F.obsolete && !is_candidate(f)) ws_.free_faces.push_back(f);
   }
 
   bool build_tetrahedron() {
