@@ -120,9 +120,9 @@ inline void clip_to_prism(ClipPolygon& poly, ClipPolygon& scratch, const Vec3* r
     Vec3 centre = Vec3::Zero();
     for (int k = 0; k < nr; ++k) centre += ref[k];
     centre /= nr;
-    Real extent = 0;
-    for (int k = 0; k < nr; ++k) extent = std::max(extent, (ref[k] - centre).norm());
-    const Real slack = kClipSlackRel * extent;
+    Real extent2 = 0;
+    for (int k = 0; k < nr; ++k) extent2 = std::max(extent2, (ref[k] - centre).squaredNorm());
+    const Real slack = kClipSlackRel * std::sqrt(extent2);
     for (int k = 0; k < nr && cur->count > 0; ++k) {
       const Vec3& a = ref[k];
       const Vec3& b = ref[(k + 1) % nr];
@@ -152,29 +152,36 @@ constexpr Real kMinPlaneCos = 0.1;
 /// points are pushed out along N, depths grow by ra + rb. Points with
 /// depth >= -margin are written to out (capacity kMaxClipVertices) with feature id
 /// id_base | label; returns their number. Returns 0 when nothing survives or the
-/// reference feature has no usable plane.
+/// reference feature has no usable plane. `ref_normal`: the reference polygon's
+/// outward unit plane normal (A's frame) where the caller knows it (a shape's face,
+/// SupportingFace::normal); otherwise (nullptr, or a segment) it is computed from the
+/// vertices.
 inline int clip_features(const Vec3* ref, int nr, bool ref_on_a, const Vec3* inc, int ni,
                          const Vec3& N, Real ra, Real rb, Real margin, std::uint32_t id_base,
-                         ContactPoint* out) {
+                         ContactPoint* out, const Vec3* ref_normal = nullptr) {
   if (nr < 2 || ni < 1) return 0;
   const Vec3 n_out = ref_on_a ? N : Vec3(-N);  // outward direction of the reference feature
   Vec3 n_ref;
-  if (nr >= 3) {
-    // Newell's method: robust plane normal of a (nearly) planar polygon.
-    n_ref.setZero();
-    for (int k = 0; k < nr; ++k) {
-      const Vec3& a = ref[k];
-      const Vec3& b = ref[(k + 1) % nr];
-      n_ref += (a - b).cross(a + b) * -0.5;
-    }
+  if (nr >= 3 && ref_normal) {
+    n_ref = *ref_normal;
   } else {
-    // Segment: the plane containing it and the direction perpendicular to it and N.
-    const Vec3 s = (ref[1] - ref[0]).normalized();
-    n_ref = n_out - n_out.dot(s) * s;
+    if (nr >= 3) {
+      // Newell's method: robust plane normal of a (nearly) planar polygon.
+      n_ref.setZero();
+      for (int k = 0; k < nr; ++k) {
+        const Vec3& a = ref[k];
+        const Vec3& b = ref[(k + 1) % nr];
+        n_ref += (a - b).cross(a + b) * -0.5;
+      }
+    } else {
+      // Segment: the plane containing it and the direction perpendicular to it and N.
+      const Vec3 s = (ref[1] - ref[0]).normalized();
+      n_ref = n_out - n_out.dot(s) * s;
+    }
+    const Real len = n_ref.norm();
+    if (!(len > 0)) return 0;
+    n_ref /= len;
   }
-  const Real len = n_ref.norm();
-  if (!(len > 0)) return 0;
-  n_ref /= len;
   if (n_ref.dot(n_out) < 0) n_ref = -n_ref;
   const Real cos_n = n_ref.dot(N);  // > 0 for ref on A, < 0 for ref on B
   if (!(std::abs(cos_n) >= kMinPlaneCos)) return 0;

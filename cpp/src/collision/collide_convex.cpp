@@ -36,23 +36,6 @@
 #include "wmo/geometry/convex_queries.h"
 
 namespace wmo {
-namespace {
-
-/// |cos| of a feature's plane normal with N; 0 for a segment or a point (a segment is
-/// only a reference when both features are segments).
-Real plane_alignment(const SupportingFace& f, const Vec3& n_out) {
-  if (f.count < 3) return 0;
-  Vec3 nn = Vec3::Zero();
-  for (int k = 0; k < f.count; ++k) {
-    const Vec3& a = f.vertices[k];
-    const Vec3& b = f.vertices[(k + 1) % f.count];
-    nn += (a - b).cross(a + b) * -0.5;  // Newell
-  }
-  const Real len = nn.norm();
-  return len > 0 ? std::abs(nn.dot(n_out)) / len : 0;
-}
-
-}  // namespace
 
 bool collide_convex_convex(const ConvexShape& a, const ConvexShape& b, const Pose& b_in_a,
                            const CollideSettings& settings, Manifold& m, QueryStatus* status) {
@@ -97,14 +80,19 @@ bool collide_convex_convex(const ConvexShape& a, const ConvexShape& b, const Pos
   int n = 0;
   const std::uint32_t feat = ((fa.feature & 255u) << 24) | ((fb.feature & 255u) << 16);
   if (fa.count >= 2 && fb.count >= 2) {
-    const Real ca = plane_alignment(fa, N), cb = plane_alignment(fb, N);
+    // The feature whose plane is better aligned with N is the reference: |cos| of its
+    // plane normal (the shape's own, SupportingFace::normal) with N, 0 for a segment (a
+    // segment is only a reference when both features are segments).
+    if (fb.count >= 3) fb.normal = b_in_a.transform_vector(fb.normal);
+    const Real ca = fa.count >= 3 ? std::abs(fa.normal.dot(N)) : Real(0);
+    const Real cb = fb.count >= 3 ? std::abs(fb.normal.dot(N)) : Real(0);
     const bool ref_on_a = ca >= cb;
     if (ref_on_a)
       n = clip::clip_features(fa.vertices.data(), fa.count, true, fb.vertices.data(), fb.count, N,
-                              0, 0, margin, feat, pts.data());
+                              0, 0, margin, feat, pts.data(), &fa.normal);
     else
       n = clip::clip_features(fb.vertices.data(), fb.count, false, fa.vertices.data(), fa.count, N,
-                              0, 0, margin, feat | (1u << 12), pts.data());
+                              0, 0, margin, feat | (1u << 12), pts.data(), &fb.normal);
   }
   // No point can be deeper than the EPA depth: translating B by depth0 along N makes
   // the shapes touch, so every point of B is then out of A. A clipped point measured

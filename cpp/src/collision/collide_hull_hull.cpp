@@ -534,7 +534,9 @@ bool collide_hull_hull(const ConvexHull& a, const ConvexHull& b, const Pose& b_i
   }
   const std::uint32_t id_base = clip::face_contact_id(!ref_on_a, ref_face, inc_face);
   ContactScratch<clip::kMaxClipVertices + 1> pts;
-  int n = clip::clip_features(ref, nr, ref_on_a, inc, ni, N, 0, 0, margin, id_base, pts.data());
+  const Vec3 ref_normal = ref_on_a ? N : Vec3(-N);  // the reference face's own plane normal
+  int n = clip::clip_features(ref, nr, ref_on_a, inc, ni, N, 0, 0, margin, id_base, pts.data(),
+                              &ref_normal);
   // The deepest point, if the clip lost it (clip::kDeepestPointTolerance).
   Real max_clip = -kInf;
   for (int k = 0; k < n; ++k) max_clip = std::max(max_clip, pts[k].depth);

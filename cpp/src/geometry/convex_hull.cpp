@@ -811,6 +811,7 @@ void ConvexHull::supporting_face(const Vec3& dir, SupportingFace& face) const {
   }
   face.feature = static_cast<std::uint32_t>(best);
   const Face& fc = faces_[best];
+  face.normal = fc.normal;
   const int m = fc.vertex_count;
   // A face with more than kMaxFaceVertices vertices is replaced by kMaxFaceVertices of
   // its vertices spread evenly along the loop. A subset of a convex polygon's vertices

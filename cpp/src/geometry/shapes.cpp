@@ -7,6 +7,7 @@
 // the rounded box is composed exactly of box, slabs, quarter cylinders and sphere
 // octants (see rounded_box_second_moment).
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <sstream>
 #include <string>
@@ -162,6 +163,8 @@ void Box::supporting_face(const Vec3& dir, SupportingFace& face) const {
   u[i1] = core_[i1];
   v[i2] = s * core_[i2];  // flipping v flips u x v for the negative face
   face.count = 4;
+  face.normal = Vec3::Zero();
+  face.normal[axis] = s;
   face.vertices[0] = c + u + v;
   face.vertices[1] = c - u + v;
   face.vertices[2] = c - u - v;
@@ -314,16 +317,33 @@ void Cylinder::supporting_face(const Vec3& dir, SupportingFace& face) const {
   // Cap facing dir: feature 0 top, 1 bottom.
   const bool top = d.y() >= 0;
   face.feature = top ? 0u : 1u;
+  face.normal = Vec3(0, top ? 1 : -1, 0);
   const Real y = top ? half_height_ : -half_height_;
-  Real phase = 0;
-  if (hlen >= kCylinderAlignSin) phase = std::atan2(hz, hx);
+  // Vertex i at angle phase -+ step_i (phase = atan2(hz, hx)), by the angle-sum
+  // formulas on the unit vector (cos phase, sin phase) = (hx, hz) / hlen and the
+  // table of step angles: no trigonometric call per query (16 sincos were a fifth of a
+  // cylinder's supporting face), and vertex 0 is the rim support point itself.
+  Real cp = 1, sp = 0;
+  if (hlen >= kCylinderAlignSin) {
+    cp = hx / hlen;
+    sp = hz / hlen;
+  }
+  static const std::array<std::array<Real, 2>, kCylinderCapPoints> kSteps = [] {
+    std::array<std::array<Real, 2>, kCylinderCapPoints> t{};
+    for (int i = 0; i < kCylinderCapPoints; ++i) {
+      const Real step = 2 * kPi * i / kCylinderCapPoints;
+      t[i] = {std::cos(step), std::sin(step)};
+    }
+    return t;
+  }();
+  // CCW seen from outside: seen from +Y, (z, x) is a right-handed basis of the cap,
+  // so the top cap runs with decreasing angle atan2(z, x) and the bottom cap with
+  // increasing: sin(phase -+ step) = sp cs -+ cp ss, cos(phase -+ step) = cp cs +- sp ss.
+  const Real turn = top ? -1 : 1;
   face.count = kCylinderCapPoints;
   for (int i = 0; i < kCylinderCapPoints; ++i) {
-    // CCW seen from outside: seen from +Y, (z, x) is a right-handed basis of the cap,
-    // so the top cap runs with decreasing atan2(z, x) and the bottom cap with increasing.
-    const Real step = 2 * kPi * i / kCylinderCapPoints;
-    const Real ang = top ? phase - step : phase + step;
-    face.vertices[i] = Vec3(cylinder_radius_ * std::cos(ang), y, cylinder_radius_ * std::sin(ang));
+    const Real cs = kSteps[i][0], ss = turn * kSteps[i][1];
+    face.vertices[i] = Vec3(cylinder_radius_ * (cp * cs - sp * ss), y, cylinder_radius_ * (sp * cs + cp * ss));
   }
 }
 

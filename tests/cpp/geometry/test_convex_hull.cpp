@@ -326,6 +326,12 @@ TEST(ConvexHull, SupportingFaceIsMostAlignedFaceCcw) {
     g.supporting_face(d, f);
     for (const auto& face : g.faces()) EXPECT_LE(face.normal.dot(d), g.faces()[f.feature].normal.dot(d));
     EXPECT_EQ(f.count, g.faces()[f.feature].vertex_count);
+    // The reported plane normal is the face's, and the vertices' own (Newell) normal
+    // agrees with it to round-off.
+    EXPECT_EQ(f.normal, g.faces()[f.feature].normal);
+    Vec3 nw = Vec3::Zero();
+    for (int i = 0; i < f.count; ++i) nw += f.vertices[i].cross(f.vertices[(i + 1) % f.count]);
+    EXPECT_GT(nw.normalized().dot(f.normal), 1 - 1e-12);
   }
 }
 

@@ -202,6 +202,7 @@ TEST(Shapes, BoxSupportingFace) {
       Vec3 n = Vec3::Zero();
       n[axis] = s;
       EXPECT_GT(newell(f).dot(n), 0) << "face must be CCW seen from outside";
+      EXPECT_EQ(f.normal, n) << "the face's plane normal is the box's own axis";
       for (int i = 0; i < 4; ++i) {
         // On the outer surface: at the half extent along the face normal, inside the shape.
         EXPECT_NEAR(f.vertices[i][axis], s * box.half_extents()[axis], kEps);
@@ -257,6 +258,15 @@ TEST(Shapes, SphereCapsuleCylinderSupportingFaces) {
       ASSERT_EQ(f.count, 16);
       const Vec3 n(0, d.y() > 0 ? 1 : -1, 0);
       EXPECT_GT(newell(f).dot(n), 0) << "cap must be CCW seen from outside";
+      EXPECT_EQ(f.normal, n) << "the cap's plane normal is the axis";
+      // The 16-gon is regular: consecutive vertices 2 pi / 16 apart on the rim, and
+      // (tilted) vertex 0 is the rim support point itself.
+      for (int i = 0; i < f.count; ++i)
+        EXPECT_NEAR((f.vertices[(i + 1) % f.count] - f.vertices[i]).norm(), 2 * 0.6 * std::sin(kPi / 16), kEps);
+      if (horiz >= 0.05) {
+        EXPECT_NEAR(f.vertices[0].x(), cyl.support(d).x(), kEps);
+        EXPECT_NEAR(f.vertices[0].z(), cyl.support(d).z(), kEps);
+      }
       Real best = -kInf;
       for (int i = 0; i < f.count; ++i) {
         EXPECT_NEAR(std::hypot(f.vertices[i].x(), f.vertices[i].z()), 0.6, kEps);  // on the rim

@@ -115,6 +115,10 @@ struct SupportingFace {
   std::array<Vec3, kMaxFaceVertices> vertices;
   /// Identifies the feature (face index, or a vertex/edge code) for persistent ids.
   std::uint32_t feature = 0;
+  /// For a polygon (count >= 3): the outward unit normal of its plane (local frame),
+  /// the shape's own (a box's axis, a hull's face plane, a cylinder's axis), so contact
+  /// clipping need not recompute it from the vertices. Unset for a segment or a point.
+  Vec3 normal;
 };
 
 /// A convex shape: core + radius. `support` includes the radius, `support_core` does
