@@ -3,7 +3,11 @@ in the same run, with the same dt, solver iterations and sleeping, per SCENES.md
 
 Each engine is timed per step (wall clock around the engine's own step call only);
 contact points, awake bodies and the deepest penetration are read after the step,
-outside the timing. Results: one CSV row per engine and step, PNG plots of steps per
+outside the timing. The engines' scenes are built first and then stepped in turns of
+``BLOCK`` steps each (WMO's 10 steps, PyBullet's 10, MuJoCo's 10, WMO's next 10...),
+so that a change of the machine's speed during the run (a shared VM drifts by 1.5x
+within minutes) hits every engine alike instead of whichever ran in the slow minutes;
+with ``interleave=False`` each engine runs all its steps in turn. Results: one CSV row per engine and step, PNG plots of steps per
 second and contact points over simulated time (the thesis's FPS figures), and a summary
 with median step times and the ratios to WMO.
 
@@ -27,7 +31,8 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterable
+from itertools import count
+from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
@@ -73,8 +78,10 @@ WMO_BLOCK_SOLVER = False
 WMO_CENTROID_ROWS = False
 
 
-def run_wmo(spec: _scenes.BoxScene, steps: int, dt: float, iterations: int, substeps: int,
-            sleeping: bool) -> EngineRun:
+def step_wmo(spec: _scenes.BoxScene, dt: float, iterations: int, substeps: int,
+             sleeping: bool) -> Iterator[EngineRun]:
+    """Builds the scene in WMO and yields its EngineRun; each further ``next`` steps it
+    once and appends the step's record (see ``_stepped``)."""
     extra = {} if WMO_CONTACT_HERTZ is None else {"contact_hertz": WMO_CONTACT_HERTZ}
     world = _scenes.build(spec, dt=dt, substeps=substeps, iterations=1, sleeping=sleeping,
                           threads=WMO_THREADS, block_solver=WMO_BLOCK_SOLVER,
@@ -86,13 +93,14 @@ def run_wmo(spec: _scenes.BoxScene, steps: int, dt: float, iterations: int, subs
     run = EngineRun("wmo", f"wmo {_version()}",
                     f"dt {dt:g}, {substeps} substeps x 1 iteration + {relax} relax{rows}, {hertz}, "
                     f"sleeping {'on' if sleeping else 'off'}, {WMO_THREADS} thread(s)")
-    for k in range(steps):
+    yield run
+    for k in count():
         t0 = time.perf_counter()
         world.step()
         t1 = time.perf_counter()
         run.records.append(StepRecord(k + 1, t1 - t0, world.contact_count, world.awake_count,
                                       float(world.max_penetration)))
-    return run
+        yield run
 
 
 def _version() -> str:
@@ -102,8 +110,8 @@ def _version() -> str:
 
 # ---- PyBullet --------------------------------------------------------------------------
 
-def run_pybullet(spec: _scenes.BoxScene, steps: int, dt: float, iterations: int, substeps: int,
-                 sleeping: bool) -> EngineRun:
+def step_pybullet(spec: _scenes.BoxScene, dt: float, iterations: int, substeps: int,
+                  sleeping: bool) -> Iterator[EngineRun]:
     import pybullet as pb  # optional peer
 
     cid = pb.connect(pb.DIRECT)
@@ -134,7 +142,8 @@ def run_pybullet(spec: _scenes.BoxScene, steps: int, dt: float, iterations: int,
             ids.append(b)
         run = EngineRun("pybullet", f"pybullet {pb.getAPIVersion()} (PyPI wheel, Bullet 3)",
                         f"dt {dt:g}, {iterations} iterations, sleeping {'on' if sleeping else 'off'}")
-        for k in range(steps):
+        yield run
+        for k in count():
             t0 = time.perf_counter()
             pb.stepSimulation(physicsClientId=cid)
             t1 = time.perf_counter()
@@ -150,7 +159,7 @@ def run_pybullet(spec: _scenes.BoxScene, steps: int, dt: float, iterations: int,
             # count is unknown (-1 in the CSV).
             awake = -1 if sleeping else len(ids)
             run.records.append(StepRecord(k + 1, t1 - t0, len(cps), awake, pen))
-        return run
+            yield run
     finally:
         pb.disconnect(physicsClientId=cid)
 
@@ -175,25 +184,65 @@ def mujoco_xml(spec: _scenes.BoxScene, dt: float, iterations: int) -> str:
     return "".join(parts)
 
 
-def run_mujoco(spec: _scenes.BoxScene, steps: int, dt: float, iterations: int, substeps: int,
-               sleeping: bool) -> EngineRun:
+def step_mujoco(spec: _scenes.BoxScene, dt: float, iterations: int, substeps: int,
+                sleeping: bool) -> Iterator[EngineRun]:
     import mujoco  # optional peer
 
     model = mujoco.MjModel.from_xml_string(mujoco_xml(spec, dt, iterations))
     data = mujoco.MjData(model)
     run = EngineRun("mujoco", f"mujoco {mujoco.__version__} (PyPI)",
                     f"dt {dt:g}, PGS {iterations} iterations, no sleeping (MuJoCo has none)")
-    for k in range(steps):
+    yield run
+    for k in count():
         t0 = time.perf_counter()
         mujoco.mj_step(model, data)
         t1 = time.perf_counter()
         n = data.ncon
         pen = float(max(0.0, -data.contact.dist[:n].min())) if n else 0.0
         run.records.append(StepRecord(k + 1, t1 - t0, int(n), len(spec), pen))
-    return run
+        yield run
+
+
+#: Steppers by engine: generators that build the scene and yield the engine's EngineRun,
+#: then step once per ``next`` (closing one releases its engine).
+STEPPERS: dict[str, Callable[..., Iterator[EngineRun]]] = {
+    "wmo": step_wmo, "pybullet": step_pybullet, "mujoco": step_mujoco}
+
+
+def _run_alone(stepper: Callable[..., Iterator[EngineRun]], spec: _scenes.BoxScene, steps: int, dt: float,
+               iterations: int, substeps: int, sleeping: bool) -> EngineRun:
+    gen = stepper(spec, dt, iterations, substeps, sleeping)
+    try:
+        run = next(gen)
+        for _ in range(steps):
+            next(gen)
+        return run
+    finally:
+        gen.close()
+
+
+def run_wmo(spec: _scenes.BoxScene, steps: int, dt: float, iterations: int, substeps: int,
+            sleeping: bool) -> EngineRun:
+    """`steps` steps of the scene in WMO alone."""
+    return _run_alone(step_wmo, spec, steps, dt, iterations, substeps, sleeping)
+
+
+def run_pybullet(spec: _scenes.BoxScene, steps: int, dt: float, iterations: int, substeps: int,
+                 sleeping: bool) -> EngineRun:
+    """`steps` steps of the scene in PyBullet alone."""
+    return _run_alone(step_pybullet, spec, steps, dt, iterations, substeps, sleeping)
+
+
+def run_mujoco(spec: _scenes.BoxScene, steps: int, dt: float, iterations: int, substeps: int,
+               sleeping: bool) -> EngineRun:
+    """`steps` steps of the scene in MuJoCo alone."""
+    return _run_alone(step_mujoco, spec, steps, dt, iterations, substeps, sleeping)
 
 
 RUNNERS: dict[str, Callable[..., EngineRun]] = {"wmo": run_wmo, "pybullet": run_pybullet, "mujoco": run_mujoco}
+
+#: Steps each engine takes in its turn when the engines are interleaved.
+BLOCK = 10
 
 
 # ---- Driver ----------------------------------------------------------------------------
@@ -203,10 +252,12 @@ class BenchResult:
     scene: str
     runs: list[EngineRun]
     skipped: dict[str, str]
+    interleaved: bool = True  #: engines stepped in turns of BLOCK steps
 
     def summary(self) -> str:
         steps = len(self.runs[0].records) if self.runs else 0
-        lines = [f"scene {self.scene}: {steps} steps, WMO on {WMO_THREADS} thread(s), peers on one"]
+        order = f"engines interleaved in turns of {BLOCK} steps" if self.interleaved else "engines one after the other"
+        lines = [f"scene {self.scene}: {steps} steps, WMO on {WMO_THREADS} thread(s), peers on one, {order}"]
         base = next((r for r in self.runs if r.engine == "wmo"), None)
         lines.append(f"{'engine':10s} {'median ms':>10s} {'steps/s':>9s} {'max contacts':>13s} "
                      f"{'deepest pen. m':>15s}  ratio to wmo   build / settings")
@@ -221,31 +272,66 @@ class BenchResult:
         return "\n".join(lines)
 
 
+def _interleaved(spec: _scenes.BoxScene, engines: list[str], steps: int, dt: float, iterations: int,
+                 substeps: int, sleeping: bool, skipped: dict[str, str]) -> list[EngineRun]:
+    """Every engine's scene built, then stepped in turns of BLOCK steps (see the module
+    docstring); an engine that is not installed or refuses the scene goes to `skipped`."""
+    gens, runs = [], []
+    try:
+        for name in engines:
+            gen = STEPPERS[name](spec, dt, iterations, substeps, sleeping)
+            try:
+                runs.append(next(gen))
+            except ImportError as e:
+                skipped[name] = f"not installed ({e})"
+                continue
+            except ValueError as e:
+                skipped[name] = str(e)
+                continue
+            gens.append(gen)
+        for start in range(0, steps, BLOCK):
+            for gen in gens:
+                for _ in range(min(BLOCK, steps - start)):
+                    next(gen)
+        return runs
+    finally:
+        for gen in gens:
+            gen.close()
+
+
 def run_bench(scene: str = "boxes3000", steps: int = 600, engines: Iterable[str] = ENGINES,
               dt: float = 1 / 60, iterations: int = 10, substeps: int = 4, sleeping: bool = False,
-              repeats: int = 1) -> BenchResult:
-    """Runs `scene` for `steps` steps in each engine (WMO first); with ``repeats`` > 1 the
-    run of each engine is repeated and the one with the median of medians is kept."""
+              repeats: int = 1, interleave: bool = True) -> BenchResult:
+    """Runs `scene` for `steps` steps in each engine, interleaved in turns of BLOCK steps
+    (``interleave=False``: each engine's steps in one go, WMO first); with ``repeats`` > 1
+    the whole run is repeated and for each engine the run with the median of its
+    medians is kept."""
     if scene not in _scenes.SPECS:
         raise ValueError(f"scene must be one of {sorted(_scenes.SPECS)}, got {scene!r}")
     if steps < 1:
         raise ValueError(f"steps must be >= 1, got {steps}")
-    spec = _scenes.SPECS[scene]()
-    runs, skipped = [], {}
+    engines = list(engines)
     for name in engines:
-        if name not in RUNNERS:
-            raise ValueError(f"engine must be one of {list(RUNNERS)}, got {name!r}")
-        try:
-            tries = [RUNNERS[name](spec, steps, dt, iterations, substeps, sleeping) for _ in range(repeats)]
-        except ImportError as e:
-            skipped[name] = f"not installed ({e})"
-            continue
-        except ValueError as e:
-            skipped[name] = str(e)
-            continue
-        tries.sort(key=lambda r: r.median_ms)
-        runs.append(tries[len(tries) // 2])
-    return BenchResult(scene, runs, skipped)
+        if name not in STEPPERS:
+            raise ValueError(f"engine must be one of {list(STEPPERS)}, got {name!r}")
+    spec = _scenes.SPECS[scene]()
+    skipped: dict[str, str] = {}
+    tries: dict[str, list[EngineRun]] = {}
+    for _ in range(repeats):
+        if interleave:
+            done = _interleaved(spec, engines, steps, dt, iterations, substeps, sleeping, skipped)
+        else:
+            done = []
+            for name in engines:
+                done += _interleaved(spec, [name], steps, dt, iterations, substeps, sleeping, skipped)
+        for r in done:
+            tries.setdefault(r.engine, []).append(r)
+    runs = []
+    for name in engines:
+        if name in tries:
+            t = sorted(tries[name], key=lambda r: r.median_ms)
+            runs.append(t[len(t) // 2])
+    return BenchResult(scene, runs, skipped, interleave)
 
 
 # ---- memory -------------------------------------------------------------------------

@@ -24,7 +24,9 @@ prints what it read (bodies, warnings), what it ran and how fast, and where it w
 in ``--data`` (default ``wmo-server-data``) and restored from there on the next start.
 
 ``bench`` steps a canonical scene (boxes3000 or pyramid, shared/SCENES.md) in WMO and in
-its peers in the same run, prints a summary with the ratios, and writes
+its peers in the same run (in turns of 10 steps each, so that the machine's drift hits
+all alike; ``--sequential`` runs them one after the other), prints a summary with the
+ratios, and writes
 ``DIR/SCENE_steps.csv`` (one row per engine and step: time, contact points, awake
 bodies, deepest penetration) and PNG plots of steps per second and contact points over
 simulated time.
@@ -63,6 +65,8 @@ def main(argv: list[str] | None = None) -> int:
     b.add_argument("--substeps", type=int, default=4, help="WMO soft-step substeps (default 4)")
     b.add_argument("--dt", type=_dt, default=1 / 60)
     b.add_argument("--repeats", type=int, default=1, help="runs per engine; the median run is kept")
+    b.add_argument("--sequential", action="store_true",
+                   help="run each engine's steps in one go instead of in interleaved turns of 10 steps")
     b.add_argument("--sleeping", action="store_true",
                    help="sleeping on (default off: the throughput figure of SCENES.md)")
     b.add_argument("--threads", type=int, default=1,
@@ -137,7 +141,8 @@ def main(argv: list[str] | None = None) -> int:
         try:
             result = bench.run_bench(args.scene, steps=args.steps, engines=engines, dt=args.dt,
                                      iterations=args.iterations, substeps=args.substeps,
-                                     repeats=args.repeats, sleeping=args.sleeping)
+                                     repeats=args.repeats, sleeping=args.sleeping,
+                                     interleave=not args.sequential)
         except ValueError as e:
             print(f"wmo bench: {e}", file=sys.stderr)
             return 2

@@ -37,6 +37,22 @@ def test_every_engine_runs_the_same_scene(tmp_path):
     assert "ratio to wmo" in result.summary()
 
 
+def test_interleaved_turns_give_each_engine_the_same_steps_as_running_alone(monkeypatch):
+    # The engines take turns of BLOCK steps (12 steps in turns of 5: 5, 5, 2), each on its
+    # own scene: every engine's per-step contacts and deepest penetration are those of
+    # running it alone (the engines are deterministic), and it takes exactly `steps`.
+    monkeypatch.setattr(bench, "BLOCK", 5)
+    together = bench.run_bench("pyramid", steps=12, engines=["wmo", *PEERS])
+    alone = bench.run_bench("pyramid", steps=12, engines=["wmo", *PEERS], interleave=False)
+    assert together.interleaved and not alone.interleaved
+    assert "interleaved in turns of 5 steps" in together.summary()
+    assert [r.engine for r in together.runs] == [r.engine for r in alone.runs] == ["wmo", *PEERS]
+    for t, a in zip(together.runs, alone.runs):
+        assert [x.step for x in t.records] == list(range(1, 13)), t.engine
+        assert [(x.contacts, x.max_penetration) for x in t.records] == \
+            [(x.contacts, x.max_penetration) for x in a.records], t.engine
+
+
 def test_bad_arguments_are_refused():
     with pytest.raises(ValueError, match="scene"):
         bench.run_bench("tower_of_babel", steps=1)
