@@ -7,9 +7,10 @@ outside the timing. The engines' scenes are built first and then stepped in turn
 ``BLOCK`` steps each (WMO's 10 steps, PyBullet's 10, MuJoCo's 10, WMO's next 10...),
 so that a change of the machine's speed during the run (a shared VM drifts by 1.5x
 within minutes) hits every engine alike instead of whichever ran in the slow minutes;
-with ``interleave=False`` each engine runs all its steps in turn. Results: one CSV row per engine and step, PNG plots of steps per
-second and contact points over simulated time (the thesis's FPS figures), and a summary
-with median step times and the ratios to WMO.
+with ``interleave=False`` each engine runs all its steps in turn. Results: one CSV row
+per engine and step, PNG plots of steps per second and contact points over simulated
+time (the thesis's FPS figures), and a summary with median step times and the ratios
+to WMO.
 
 Settings that cannot be made identical are stated in the summary: WMO's soft-step
 solver runs ``substeps`` substeps of one velocity iteration each plus the World's relax
@@ -31,6 +32,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from functools import partial
 from itertools import count
 from typing import Callable, Iterable, Iterator
 
@@ -81,7 +83,7 @@ WMO_CENTROID_ROWS = False
 def step_wmo(spec: _scenes.BoxScene, dt: float, iterations: int, substeps: int,
              sleeping: bool) -> Iterator[EngineRun]:
     """Builds the scene in WMO and yields its EngineRun; each further ``next`` steps it
-    once and appends the step's record (see ``_stepped``)."""
+    once and appends the step's record (see STEPPERS)."""
     extra = {} if WMO_CONTACT_HERTZ is None else {"contact_hertz": WMO_CONTACT_HERTZ}
     world = _scenes.build(spec, dt=dt, substeps=substeps, iterations=1, sleeping=sleeping,
                           threads=WMO_THREADS, block_solver=WMO_BLOCK_SOLVER,
@@ -211,6 +213,7 @@ STEPPERS: dict[str, Callable[..., Iterator[EngineRun]]] = {
 
 def _run_alone(stepper: Callable[..., Iterator[EngineRun]], spec: _scenes.BoxScene, steps: int, dt: float,
                iterations: int, substeps: int, sleeping: bool) -> EngineRun:
+    """`steps` steps of the scene in one engine alone."""
     gen = stepper(spec, dt, iterations, substeps, sleeping)
     try:
         run = next(gen)
@@ -221,25 +224,10 @@ def _run_alone(stepper: Callable[..., Iterator[EngineRun]], spec: _scenes.BoxSce
         gen.close()
 
 
-def run_wmo(spec: _scenes.BoxScene, steps: int, dt: float, iterations: int, substeps: int,
-            sleeping: bool) -> EngineRun:
-    """`steps` steps of the scene in WMO alone."""
-    return _run_alone(step_wmo, spec, steps, dt, iterations, substeps, sleeping)
-
-
-def run_pybullet(spec: _scenes.BoxScene, steps: int, dt: float, iterations: int, substeps: int,
-                 sleeping: bool) -> EngineRun:
-    """`steps` steps of the scene in PyBullet alone."""
-    return _run_alone(step_pybullet, spec, steps, dt, iterations, substeps, sleeping)
-
-
-def run_mujoco(spec: _scenes.BoxScene, steps: int, dt: float, iterations: int, substeps: int,
-               sleeping: bool) -> EngineRun:
-    """`steps` steps of the scene in MuJoCo alone."""
-    return _run_alone(step_mujoco, spec, steps, dt, iterations, substeps, sleeping)
-
-
-RUNNERS: dict[str, Callable[..., EngineRun]] = {"wmo": run_wmo, "pybullet": run_pybullet, "mujoco": run_mujoco}
+#: Each engine alone: ``RUNNERS[name](spec, steps, dt, iterations, substeps, sleeping)``.
+RUNNERS: dict[str, Callable[..., EngineRun]] = {
+    name: partial(_run_alone, stepper) for name, stepper in STEPPERS.items()}
+run_wmo = RUNNERS["wmo"]
 
 #: Steps each engine takes in its turn when the engines are interleaved.
 BLOCK = 10
