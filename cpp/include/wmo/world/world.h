@@ -489,10 +489,12 @@ class World {
     std::int8_t mesh_side = 0;
   };
   struct CachedManifold {
+    // The geometry first: collide_pair reads it (reuse test, anchors) before anything
+    // else, so its lines are the first the prefetch brings.
+    ManifoldGeometry geometry;
     std::uint64_t stamp = 0;  ///< the step (step_count + 1) that last wrote it
     int count = 0;
     std::array<CachedPoint, 4> points{};
-    ManifoldGeometry geometry;
   };
 
   int require(BodyId id, const char* what) const;
