@@ -94,11 +94,8 @@ def test_random_scenes_never_produce_nan_or_escape(seed):
 
 def _world_centres_of_mass(w, bodies):
     """World positions of the bodies' centres of mass: origin + R(q) c."""
-    q = w.orientations[bodies]
-    c = np.array([w.body(i).center_of_mass for i in bodies])
-    u, s = q[:, :3], q[:, 3:4]  # (x, y, z), w
-    t = 2 * np.cross(u, c)
-    return w.positions[bodies] + c + s * t + np.cross(u, t)
+    return np.array([w.positions[i] + _rotation(w.orientations[i]) @ np.asarray(w.body(i).center_of_mass)
+                     for i in bodies])
 
 
 def _rolling_ground(one_sided):
