@@ -1,6 +1,7 @@
 """Random worlds of scripts/fuzz_worlds.py (every setting, shape and mass ratio, kicks,
 bodies added and removed; 2000 steps each), pinned: the seeds that found a defect, now
-fixed, must hold, and the ones that still fail are strict xfails saying why.
+fixed, must hold (one that still failed would be a strict xfail saying why; none does
+today).
 
 With CCD on every dynamic body, losing a body through the ground or the walls, or any
 non-finite state, is a defect. (A body without CCD may tunnel through a thin wall:
@@ -84,14 +85,17 @@ def test_a_random_world_on_a_two_sided_mesh_ground_with_a_crushed_body_holds(see
     _holds(seed, ("two-sided",))
 
 
-@pytest.mark.xfail(strict=True, reason="issue 3, open: two-sided mesh grounds lose a body in 1 of seeds "
-                   "1-1200: seed 1089 (lost by the engine of commit 89f82de too) a 0.12 kg flat hull "
-                   "sliding at 5-9 m/s into a crease (dt 1/30, one substep) meets the rising triangle 4 cm "
-                   "deep and is taken from its back. (Seed 1060, a 4.6 kg hull wedged at a wall's foot, "
-                   "sank under the sheet with the engines of 2026-12-06 and early 2026-12-07 and holds "
-                   "with GJK's projected closest point: the scene is chaotic, so it is not pinned either "
-                   "way.) Use one_sided=True for grounds (none of seeds 1-1600 lost on one-sided, box and "
-                   "plane)")
 @pytest.mark.parametrize("seed", [1089])
-def test_a_random_world_on_a_two_sided_mesh_ground_at_a_crease_or_a_walls_foot_holds(seed):
+def test_a_random_world_on_a_two_sided_mesh_ground_at_a_crease_holds(seed):
+    # Seed 1089, lost by every engine until 2026-12-07 (the last two-sided loss of seeds
+    # 1-1200): a 0.12 kg hull 3 mm thick rests in a crease of the ground (dt 1/30, one
+    # substep), overlapping it by 9 mm at the crease, and a kick sends it along the
+    # ground at 10 m/s; within the step it passed wholly behind the next triangle and fell
+    # through. CCD let a body that starts overlapping something deepen that overlap by its
+    # budget, and took a mesh's deepest start overlap as the overlap: so the next
+    # triangle, which the hull started apart from, could take it 9 mm deep, three times
+    # its thickness. Each triangle of a mesh (and each child of a compound) is now swept
+    # from its own start (ToiSettings::deepen_allowance): the next triangle stops the
+    # hull at its surface. Sweeps with it, CCD on every body: two-sided seeds 1-1200 and
+    # box, plane and one-sided seeds 1-1600, none lost.
     _holds(seed, ("two-sided",))

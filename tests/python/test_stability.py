@@ -576,10 +576,14 @@ def test_block_solved_manifolds_hold_a_20_box_tower_at_the_defaults():
                    "when its springs are too soft for its height; centroid_rows=True, which holds 20 "
                    "boxes, does not change that. 30 need stiffer contacts: 120 Hz at 8 substeps, or 8 "
                    "substeps with load-stiffened contacts (contact_max_sag, tests above), both twice the "
-                   "solve cost; load stiffening at 4 substeps delays the fall but does not stop it. "
-                   "The peers at the same dt (benchmarks/accuracy/run.py --cases tower30, 20 s): "
-                   "PyBullet topples it too (10 to 50 iterations; it stands from dt 1/960), MuJoCo "
-                   "holds it at its defaults (14 cm)")
+                   "solve cost; load stiffening at 4 substeps delays the fall but does not stop it, even with "
+                   "its cap (a quarter of the substep rate) lifted 100-fold (down by step ~900). Measured "
+                   "2026-12-07, falling (0.5 m off) by step: iterations 2-10 or relax_iterations 4-10, "
+                   "300-500; contact_hertz 60 (the cap), 500; block_solver=True, ~3200; rigid rows (no "
+                   "softness, the soft bias kept: an experiment, not a setting) ~300, standing only at 30 "
+                   "iterations, 6.5x the step. The peers at the same dt (benchmarks/accuracy/run.py "
+                   "--cases tower30, 20 s): PyBullet topples it too (10 to 50 iterations; it stands from "
+                   "dt 1/960), MuJoCo holds it at its defaults (14 cm)")
 def test_tower_of_30_stands_for_6000_steps_at_the_defaults():
     w = scenes.tower(30, sleeping=False)
     p0 = np.array(w.positions)

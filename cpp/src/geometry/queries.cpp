@@ -322,7 +322,7 @@ template <class DistFn>
 ToiResult advance(DistFn&& dist, const Vec3& dv, Real spin, Real duration, const ToiSettings& settings) {
   ToiResult res;
   const Real tol = settings.tolerance;
-  const Real target = settings.target_distance;
+  Real target = settings.target_distance;
   Real t = 0;
   for (int it = 0;; ++it) {
     const DistanceResult d = dist(t);
@@ -337,6 +337,10 @@ ToiResult advance(DistFn&& dist, const Vec3& dv, Real spin, Real duration, const
     res.point_a = d.point_a;
     res.point_b = d.point_b;
     res.normal = d.normal;
+    // Started at or past the target: with deepen_allowance, the target moves below this
+    // pair's own start (ToiSettings::deepen_allowance).
+    if (it == 0 && settings.deepen_allowance >= 0 && d.distance <= target + tol)
+      target = d.distance - settings.deepen_allowance;
     if (d.distance <= target + tol) {
       res.hit = true;
       return res;

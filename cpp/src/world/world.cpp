@@ -2623,14 +2623,11 @@ ToiResult World::sweep_to_allowance(int a, const Motion& ma, int b, const Motion
   ToiSettings st;
   st.tolerance = 0.5 * budget;
   st.target_distance = -2 * budget;
-  ToiResult r = time_of_impact(*shapes_[a], ma, *shapes_[b], mb, duration, st);
-  if (r.hit && r.time == 0 && r.status == QueryStatus::kOk) {
-    // Already deeper than that at the start (r.distance, the deepest overlap): it may
-    // deepen by the budget.
-    st.target_distance = r.distance - budget;
-    r = time_of_impact(*shapes_[a], ma, *shapes_[b], mb, duration, st);
-  }
-  return r;
+  // Already deeper than that at the start: it may deepen by the budget, each child of a
+  // compound and each triangle of a mesh from its own start (ToiSettings::
+  // deepen_allowance).
+  st.deepen_allowance = budget;
+  return time_of_impact(*shapes_[a], ma, *shapes_[b], mb, duration, st);
 }
 
 int World::continuous_step() {

@@ -445,5 +445,58 @@ TEST(TimeOfImpact, MissesOverlapsAndBadInput) {
   EXPECT_EQ(time_of_impact(s, m, Plane(Vec3(0, 1, 0), 0), p, 1.0).status, QueryStatus::kUnsupported);
 }
 
+TEST(TimeOfImpact, DeepenAllowanceIsPerTriangle) {
+  // A 3 mm plate resting 5 mm into a floor triangle slides at 30 m/s towards a wall
+  // triangle of the same mesh, 0.7 m ahead of its front face. With deepen_allowance the
+  // floor's start overlap lets the plate deepen that overlap by the allowance, and
+  // nothing else: the wall, which the plate starts apart from, stops it within the
+  // target (2e-4 m) of touching. Taking the mesh's deepest start overlap as everyone's
+  // target (the world's CCD before, scripts/fuzz_worlds.py seed 1089) lets the plate
+  // 5 mm into the wall, more than its thickness.
+  const TriangleMesh mesh({Vec3(-3, 0, -3), Vec3(-3, 0, 3), Vec3(0.9, 0, 0), Vec3(1, -1, -2), Vec3(1, -1, 2),
+                           Vec3(1, 2, 0)},
+                          {{0, 1, 2}, {3, 5, 4}});
+  const Box plate(Vec3(0.3, 0.0015, 0.3));
+  Motion a, m;
+  a.start = Pose(Vec3(0, 0.0015 - 0.005, 0));
+  a.linear_velocity = Vec3(30, 0, 0);
+  ToiSettings st;
+  st.tolerance = 1e-4;
+  st.target_distance = -2e-4;
+  st.deepen_allowance = 1e-4;
+  const ToiResult r = time_of_impact(plate, a, mesh, m, 1.0 / 30, st);
+  ASSERT_TRUE(r.hit);
+  EXPECT_EQ(r.status, QueryStatus::kOk);
+  const Real touch = 0.7 / 30;  // the front face reaches x = 1
+  EXPECT_LE(r.time, touch + (2e-4 + 1e-12) / 30);
+  EXPECT_GE(r.time, touch - 1e-3 / 30);
+  // At the reported time the plate is in the wall by at most the target.
+  const Pose at = a.at(r.time);
+  const Real wall_overlap = at.position.x() + 0.3 - 1;
+  EXPECT_LE(wall_overlap, 2e-4 + st.tolerance);
+  // The old rule: the mesh's deepest start overlap (5 mm, the floor's) less the
+  // allowance as the target for every triangle.
+  ToiSettings global = st;
+  global.deepen_allowance = -1;
+  global.target_distance = -0.005 - 1e-4;
+  const ToiResult g = time_of_impact(plate, a, mesh, m, 1.0 / 30, global);
+  ASSERT_TRUE(g.hit);
+  EXPECT_GT(a.at(g.time).position.x() + 0.3 - 1, 0.0045);
+  // A convex pair: the same as a second search from the start depth.
+  const Box floor(Vec3(3, 0.5, 3));
+  Motion f;
+  f.start = Pose(Vec3(0, -0.5, 0));
+  Motion down = a;
+  down.linear_velocity = Vec3(0, -0.3, 0);
+  const ToiResult c = time_of_impact(plate, down, floor, f, 1.0 / 30, st);
+  ASSERT_TRUE(c.hit);
+  EXPECT_TRUE(c.initially_overlapping);
+  EXPECT_NEAR(c.distance, -0.005 - 1e-4, st.tolerance);
+  ToiSettings second = global;
+  second.target_distance = -0.005 - 1e-4;
+  const ToiResult c2 = time_of_impact(plate, down, floor, f, 1.0 / 30, second);
+  EXPECT_EQ(c.time, c2.time);
+}
+
 }  // namespace
 }  // namespace wmo

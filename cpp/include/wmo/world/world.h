@@ -169,9 +169,10 @@ struct WorldSettings {
   ///     of a pile while its neighbours go on makes new overlaps; measured on boxes3000
   ///     with CCD on every box, 2.5 m instead of 0.7 m). A body that would overlap
   ///     anything by more than half its allowance (ccd_penetration), or deepen an
-  ///     overlap it started with by more than a quarter of it, is put back at the first
-  ///     time it does (Box2D v3's continuous step, extended to rotation and to fast
-  ///     pairs), and an impulse there stops the approach (the pair's restitution above
+  ///     overlap it started with by more than a quarter of it (each triangle of a mesh
+  ///     and each child of a compound on its own: ToiSettings::deepen_allowance), is put
+  ///     back at the first time it does (Box2D v3's continuous step, extended to
+  ///     rotation and to fast pairs), and an impulse there stops the approach (the pair's restitution above
   ///     the threshold), as the solver would at that contact. The potential energy the
   ///     move back gains is taken out of its kinetic energy: CCD never adds energy.
   ///  3. The shock pass (in the solve stage, after each substep's relax passes): a CCD
