@@ -1,7 +1,6 @@
 """Random worlds of scripts/fuzz_worlds.py (every setting, shape and mass ratio, kicks,
 bodies added and removed; 2000 steps each), pinned: the seeds that found a defect, now
-fixed, must hold (one that still failed would be a strict xfail saying why; none does
-today).
+fixed, must hold, and the ones that still fail are strict xfails saying why.
 
 With CCD on every dynamic body, losing a body through the ground or the walls, or any
 non-finite state, is a defect. (A body without CCD may tunnel through a thin wall:
@@ -98,4 +97,18 @@ def test_a_random_world_on_a_two_sided_mesh_ground_at_a_crease_holds(seed):
     # from its own start (ToiSettings::deepen_allowance): the next triangle stops the
     # hull at its surface. Sweeps with it, CCD on every body: two-sided seeds 1-1200 and
     # box, plane and one-sided seeds 1-1600, none lost.
+    _holds(seed, ("two-sided",))
+
+
+@pytest.mark.xfail(strict=True, reason="issue 3, open: two-sided mesh grounds lose a body in 1 of seeds "
+                   "1201-2000: seed 1312 (lost by the engine before 2026-12-07's CCD change too, by step "
+                   "1000) a 0.24 g hull 3.7 mm thick at dt 1/30 with one substep and one iteration rests "
+                   "1-1.5 cm into the ground (the soft contacts' sag: their spring is capped at a quarter of "
+                   "the substep rate, 7.5 Hz), deeper than its thickness, so wholly behind the sheet, where "
+                   "its contact history holds it; kicked to 7.8 m/s along the ground it slides on (CCD "
+                   "stopping it at the triangles it reaches) and falls away at a wall's foot. Use "
+                   "one_sided=True for grounds, or more substeps (none of seeds 1-1600 lost on one-sided, box "
+                   "and plane)")
+@pytest.mark.parametrize("seed", [1312])
+def test_a_random_world_with_a_thin_hull_sagging_through_a_two_sided_mesh_ground_holds(seed):
     _holds(seed, ("two-sided",))
