@@ -434,11 +434,26 @@ ToiResult toi_mesh(const TriangleMesh& mesh, const Motion& mm, const ConvexShape
   const Real spin_b = wb > 0 ? wb * rotation_bound(b, mb.center) : 0;
   const Vec3 dv = mm.linear_velocity - mb.linear_velocity;
   const auto& v = mesh.vertices();
+  // ToiSettings::parallel_skip: B's rotation centre at the start and at the end, and how
+  // far its points can move by turning, in the frame of the mesh (which does not move).
+  const bool skip_parallel = st.parallel_skip > 0 && mm.linear_velocity.isZero(0) && wm == 0;
+  Vec3 c0 = Vec3::Zero(), c1 = Vec3::Zero();
+  if (skip_parallel) {
+    c0 = mm.start.inverse_transform_point(mb.start.transform_point(mb.center));
+    c1 = c0 + mm.start.inverse_transform_vector(duration * mb.linear_velocity);
+  }
+  const Real turn = duration * spin_b;
   ToiResult best;
   bool any = false;
   bool unsupported_pair = false;
   mesh.bvh().query_aabb(query, [&](int t) {
     const auto& tri = mesh.triangles()[t];
+    if (skip_parallel) {
+      const Vec3& n = mesh.triangle_normal(t);
+      const Real s0 = n.dot(c0 - v[tri[0]]), s1 = n.dot(c1 - v[tri[0]]);
+      const Real side = s0 > 0 ? 1 : -1;
+      if (s0 != 0 && side * s1 >= st.parallel_skip && side * (s0 - s1) + turn <= st.parallel_skip) return true;
+    }
     Real spin = spin_b;
     if (wm > 0)
       spin += wm * std::max({(v[tri[0]] - mm.center).norm(), (v[tri[1]] - mm.center).norm(),

@@ -2627,6 +2627,9 @@ ToiResult World::sweep_to_allowance(int a, const Motion& ma, int b, const Motion
   // compound and each triangle of a mesh from its own start (ToiSettings::
   // deepen_allowance).
   st.deepen_allowance = budget;
+  // Triangles of a mesh that body a slides along, moving towards their planes by less
+  // than a quarter of its inner radius, are the solver's (ToiSettings::parallel_skip).
+  st.parallel_skip = 0.25 * inner_radius_[a];
   return time_of_impact(*shapes_[a], ma, *shapes_[b], mb, duration, st);
 }
 

@@ -498,5 +498,38 @@ TEST(TimeOfImpact, DeepenAllowanceIsPerTriangle) {
   EXPECT_EQ(c.time, c2.time);
 }
 
+TEST(TimeOfImpact, ParallelSkipLeavesTheTrianglesABodySlidesAlong) {
+  // A 1 cm plate resting 0.1 mm into a flat two-triangle floor slides 8 cm along it and
+  // tilts by 1e-3 rad about the slide's cross axis (its front edge 0.2 mm deeper at the
+  // end). Searched with a target of 0.125 mm the floor stops it part of the way;
+  // with parallel_skip (1.25 mm: no point of the plate comes more than 0.2 mm closer to
+  // the floor's plane, and its centre stays 4.9 mm above it) the floor is left alone.
+  // A wall triangle ahead, which the plate runs into, is searched all the same.
+  const Box plate(Vec3(0.2, 0.005, 0.2));
+  ToiSettings st;
+  st.tolerance = 3e-5;
+  st.target_distance = -1.25e-4;
+  Motion a, m;
+  a.start = Pose(Vec3(0, 0.005 - 1e-4, 0));
+  a.linear_velocity = Vec3(4.8, 0, 0);
+  a.angular_velocity = Vec3(0, 0, -0.06);  // 1e-3 rad in 1/60 s
+  const Real dt = 1.0 / 60;
+  const TriangleMesh floor({Vec3(-3, 0, -3), Vec3(-3, 0, 3), Vec3(3, 0, 3), Vec3(3, 0, -3)}, {{0, 1, 2}, {0, 2, 3}});
+  const ToiResult searched = time_of_impact(plate, a, floor, m, dt, st);
+  ASSERT_TRUE(searched.hit);
+  EXPECT_LT(searched.time, dt);
+  ToiSettings skip = st;
+  skip.parallel_skip = 1.25e-3;
+  EXPECT_FALSE(time_of_impact(plate, a, floor, m, dt, skip).hit);
+  // The floor and a wall at x = 0.25 (the plate's front face starts at 0.2).
+  const TriangleMesh walled({Vec3(-3, 0, -3), Vec3(-3, 0, 3), Vec3(3, 0, 3), Vec3(3, 0, -3), Vec3(0.25, -1, -2),
+                             Vec3(0.25, -1, 2), Vec3(0.25, 2, 0)},
+                            {{0, 1, 2}, {0, 2, 3}, {4, 6, 5}});
+  const ToiResult wall = time_of_impact(plate, a, walled, m, dt, skip);
+  ASSERT_TRUE(wall.hit);
+  EXPECT_NEAR(wall.time, 0.05 / 4.8, 2e-4);
+  EXPECT_NEAR(std::abs(wall.normal.x()), 1.0, 1e-3);
+}
+
 }  // namespace
 }  // namespace wmo
