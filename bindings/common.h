@@ -10,6 +10,7 @@
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
+#include <span>
 #include <string>
 #include <vector>
 
@@ -82,7 +83,7 @@ py::array to_array(const Vec3& v);
 py::array to_array(const Quat& q);  // (x, y, z, w)
 py::array to_array(const Mat3& m);
 /// Read-only (N, 3) float64 view of `points` that keeps `owner` alive (zero copy).
-py::array vec3_view(const std::vector<Vec3>& points, py::handle owner);
+py::array vec3_view(std::span<const Vec3> points, py::handle owner);
 
 // Submodule registration, one per binding file.
 void bind_math(py::module_& m);

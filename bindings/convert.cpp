@@ -168,7 +168,7 @@ py::array to_array(const Mat3& m) {
   return read_only(a);
 }
 
-py::array vec3_view(const std::vector<Vec3>& points, py::handle owner) {
+py::array vec3_view(std::span<const Vec3> points, py::handle owner) {
   // Eigen's Vector3d is three packed doubles (no alignment padding), so a vector of
   // them is an (N, 3) C-contiguous block.
   static_assert(sizeof(Vec3) == 3 * sizeof(double), "Vec3 must be packed");

@@ -54,6 +54,10 @@
 #include <algorithm>
 #include <cfloat>
 #include <cmath>
+#include <memory>
+#include <new>
+#include <span>
+#include <stdexcept>
 #include <numeric>
 #include <sstream>
 #include <string>
@@ -366,10 +370,40 @@ class QuickhullBuilder {
   int flood_stamp_ = 0;
 };
 
+/// Vertex indices of face f's loop (ConvexHull::face_vertices), on the arrays being
+/// built as on the packed ones.
+std::vector<int> loop_of(std::span<const ConvexHull::Face> faces, std::span<const ConvexHull::HalfEdge> half_edges,
+                         int f) {
+  if (f < 0 || f >= static_cast<int>(faces.size()))
+    throw std::out_of_range("face_vertices: face " + std::to_string(f) + " out of range");
+  const ConvexHull::Face& face = faces[f];
+  std::vector<int> out;
+  out.reserve(face.vertex_count);
+  int h = face.first_edge;
+  for (int k = 0; k < face.vertex_count; ++k) {
+    out.push_back(half_edges[h].origin);
+    h = half_edges[h].next;
+  }
+  return out;
+}
+
 }  // namespace
+
+void ConvexHull::AlignedDelete::operator()(std::byte* p) const { ::operator delete[](p, std::align_val_t(64)); }
 
 ConvexHull::ConvexHull(const std::vector<Vec3>& points) : ConvexShape(ShapeType::kConvexHull) {
   radius_ = 0;
+  // The arrays are built here, then copied into one block (storage_, see the header).
+  struct {
+    std::vector<Vec3> vertices;
+    std::vector<Face> faces;
+    std::vector<HalfEdge> half_edges;
+    std::vector<int> edges;
+    std::vector<EdgeArc> edge_arcs;
+    std::vector<VertexEdge> vertex_edges;
+    std::vector<int> vertex_edge_begin;
+    std::vector<Real> vertex_coords;
+  } build;
   if (points.size() < 4)
     throw InvalidArgument("points must contain at least 4 points, got " +
                           std::to_string(points.size()));
@@ -454,10 +488,10 @@ ConvexHull::ConvexHull(const std::vector<Vec3>& points) : ConvexShape(ShapeType:
   // One build at tolerance `tol`, validated afterwards; false if the result is not a
   // closed convex polytope within the tolerance (see the file comment).
   auto attempt = [&](const Real tol) -> bool {
-    vertices_.clear();
-    faces_.clear();
-    half_edges_.clear();
-    edges_.clear();
+    build.vertices.clear();
+    build.faces.clear();
+    build.half_edges.clear();
+    build.edges.clear();
     vertex_neighbors_.clear();
     QuickhullBuilder qh(p, tol);
     qh.build(i0, i1, i2, i3);
@@ -627,15 +661,15 @@ ConvexHull::ConvexHull(const std::vector<Vec3>& points) : ConvexShape(ShapeType:
     for (const auto& l : loops)
       for (int v : l)
         if (new_index[v] < 0) {
-          new_index[v] = static_cast<int>(vertices_.size());
-          vertices_.push_back(p[v]);
+          new_index[v] = static_cast<int>(build.vertices.size());
+          build.vertices.push_back(p[v]);
         }
     std::unordered_map<long long, int> edge_of;  // (origin, dest) -> half-edge
     auto key = [](int a, int b) { return (static_cast<long long>(a) << 32) | static_cast<unsigned>(b); };
     for (const auto& l : loops) {
-      const int f = static_cast<int>(faces_.size());
+      const int f = static_cast<int>(build.faces.size());
       const int m = static_cast<int>(l.size());
-      const int first = static_cast<int>(half_edges_.size());
+      const int first = static_cast<int>(build.half_edges.size());
       // The seed triangle's accurate normal (a Newell sum over a sliver would be as bad as
       // a plain cross product). The offset is the largest over the loop: every vertex of
       // the face is on or behind its plane (by at most 2 eps_merge), and over each merged
@@ -644,22 +678,22 @@ ConvexHull::ConvexHull(const std::vector<Vec3>& points) : ConvexShape(ShapeType:
       const Vec3 nn = loop_normal[f];
       Real off = -kInf;
       for (int v : l) off = std::max(off, nn.dot(p[v]));
-      faces_.push_back(Face{nn, off, first, m});
+      build.faces.push_back(Face{nn, off, first, m});
       for (int k = 0; k < m; ++k) {
         const int a = new_index[l[k]], b = new_index[l[(k + 1) % m]];
         edge_of[key(a, b)] = first + k;
-        half_edges_.push_back(HalfEdge{a, -1, first + (k + 1) % m, f});
+        build.half_edges.push_back(HalfEdge{a, -1, first + (k + 1) % m, f});
       }
     }
-    for (int h = 0; h < static_cast<int>(half_edges_.size()); ++h) {
-      const int a = half_edges_[h].origin, b = half_edges_[half_edges_[h].next].origin;
+    for (int h = 0; h < static_cast<int>(build.half_edges.size()); ++h) {
+      const int a = build.half_edges[h].origin, b = build.half_edges[build.half_edges[h].next].origin;
       auto it = edge_of.find(key(b, a));
-      half_edges_[h].twin = it == edge_of.end() ? -1 : it->second;
-      if (it != edge_of.end() && h < it->second) edges_.push_back(h);
+      build.half_edges[h].twin = it == edge_of.end() ? -1 : it->second;
+      if (it != edge_of.end() && h < it->second) build.edges.push_back(h);
     }
-    vertex_neighbors_.assign(vertices_.size(), {});
-    for (const HalfEdge& h : half_edges_)
-      vertex_neighbors_[h.origin].push_back(half_edges_[h.next].origin);
+    vertex_neighbors_.assign(build.vertices.size(), {});
+    for (const HalfEdge& h : build.half_edges)
+      vertex_neighbors_[h.origin].push_back(build.half_edges[h.next].origin);
 
     // Validation: closed (every half-edge has a twin), genus 0, vertices of degree >= 3,
     // every face loop convex
@@ -668,38 +702,38 @@ ConvexHull::ConvexHull(const std::vector<Vec3>& points) : ConvexShape(ShapeType:
     const Real check = 4 * eps_merge;
     for (const auto& nb : vertex_neighbors_)
       if (nb.size() < 3) return false;  // every vertex a corner
-    for (int h = 0; h < static_cast<int>(half_edges_.size()); ++h) {
-      const int t = half_edges_[h].twin;
-      if (t < 0 || half_edges_[t].twin != h) return false;
+    for (int h = 0; h < static_cast<int>(build.half_edges.size()); ++h) {
+      const int t = build.half_edges[h].twin;
+      if (t < 0 || build.half_edges[t].twin != h) return false;
     }
-    const int ne = static_cast<int>(edges_.size());
-    if (2 * ne != static_cast<int>(half_edges_.size())) return false;
-    if (static_cast<int>(vertices_.size()) - ne + static_cast<int>(faces_.size()) != 2) return false;
-    for (int f = 0; f < static_cast<int>(faces_.size()); ++f) {
-      const std::vector<int> l = face_vertices(f);
+    const int ne = static_cast<int>(build.edges.size());
+    if (2 * ne != static_cast<int>(build.half_edges.size())) return false;
+    if (static_cast<int>(build.vertices.size()) - ne + static_cast<int>(build.faces.size()) != 2) return false;
+    for (int f = 0; f < static_cast<int>(build.faces.size()); ++f) {
+      const std::vector<int> l = loop_of(build.faces, build.half_edges, f);
       const int m = static_cast<int>(l.size());
-      const Face& face = faces_[f];
+      const Face& face = build.faces[f];
       for (int k = 0; k < m; ++k) {
-        const Vec3& a = vertices_[l[k]];
-        const Vec3& b = vertices_[l[(k + 1) % m]];
-        const Vec3& c = vertices_[l[(k + 2) % m]];
+        const Vec3& a = build.vertices[l[k]];
+        const Vec3& b = build.vertices[l[(k + 1) % m]];
+        const Vec3& c = build.vertices[l[(k + 2) % m]];
         if ((b - a).cross(c - b).dot(face.normal) < -check * (c - a).norm()) return false;
       }
     }
-    for (const HalfEdge& h : half_edges_) {
-      const Face& face = faces_[h.face];
-      int e = half_edges_[h.twin].next;
-      for (int k = 0; k < faces_[half_edges_[h.twin].face].vertex_count; ++k, e = half_edges_[e].next)
-        if (face.normal.dot(vertices_[half_edges_[e].origin]) - face.offset > check) return false;
+    for (const HalfEdge& h : build.half_edges) {
+      const Face& face = build.faces[h.face];
+      int e = build.half_edges[h.twin].next;
+      for (int k = 0; k < build.faces[build.half_edges[h.twin].face].vertex_count; ++k, e = build.half_edges[e].next)
+        if (face.normal.dot(build.vertices[build.half_edges[e].origin]) - face.offset > check) return false;
     }
     // Local convexity does not exclude a surface that wraps around twice, and dropped
     // points must stay within the tolerance: check every input point against every face
     // while that costs at most ~1e7 multiply-adds (a few ms; hulls used for simulation
     // are far smaller than that allows). Beyond it, only the hull's vertices are checked.
     const std::vector<Vec3>& all =
-        static_cast<double>(p.size()) * faces_.size() <= 1e7 ? p : vertices_;
-    if (static_cast<double>(all.size()) * faces_.size() <= 1e7)
-      for (const Face& face : faces_)
+        static_cast<double>(p.size()) * build.faces.size() <= 1e7 ? p : build.vertices;
+    if (static_cast<double>(all.size()) * build.faces.size() <= 1e7)
+      for (const Face& face : build.faces)
         for (const Vec3& v : all)
           if (face.normal.dot(v) - face.offset > check) return false;
     return true;
@@ -718,56 +752,74 @@ ConvexHull::ConvexHull(const std::vector<Vec3>& points) : ConvexShape(ShapeType:
     throw InvalidArgument(
         "points could not be built into a convex hull: the cloud is degenerate within "
         "round-off (" + std::to_string(n) + " distinct points)");
-  for (const Vec3& v : vertices_) aabb_.grow(v);
+  for (const Vec3& v : build.vertices) aabb_.grow(v);
 
   // What the separating axis test reads (collide_hull_hull.cpp), precomputed once.
-  const int nv = static_cast<int>(vertices_.size());
-  const int nh = static_cast<int>(half_edges_.size());
+  const int nv = static_cast<int>(build.vertices.size());
+  const int nh = static_cast<int>(build.half_edges.size());
   std::vector<int> edge_of_half(nh, -1);
-  edge_arcs_.resize(edges_.size());
-  for (int k = 0; k < static_cast<int>(edges_.size()); ++k) {
-    const int h = edges_[k];
-    const HalfEdge& he = half_edges_[h];
+  build.edge_arcs.resize(build.edges.size());
+  for (int k = 0; k < static_cast<int>(build.edges.size()); ++k) {
+    const int h = build.edges[k];
+    const HalfEdge& he = build.half_edges[h];
     edge_of_half[h] = k;
     edge_of_half[he.twin] = k;
-    edge_arcs_[k] = EdgeArc{he.face, half_edges_[he.twin].face, he.origin, half_edges_[he.next].origin};
+    build.edge_arcs[k] = EdgeArc{he.face, build.half_edges[he.twin].face, he.origin, build.half_edges[he.next].origin};
   }
   std::vector<int> out_half(nv, -1);
-  for (int h = 0; h < nh; ++h) out_half[half_edges_[h].origin] = h;  // the highest per vertex
-  vertex_edge_begin_.assign(nv + 1, 0);
-  vertex_edges_.clear();
-  vertex_edges_.reserve(nh);
+  for (int h = 0; h < nh; ++h) out_half[build.half_edges[h].origin] = h;  // the highest per vertex
+  build.vertex_edge_begin.assign(nv + 1, 0);
+  build.vertex_edges.clear();
+  build.vertex_edges.reserve(nh);
   for (int v = 0; v < nv; ++v) {
-    vertex_edge_begin_[v] = static_cast<int>(vertex_edges_.size());
+    build.vertex_edge_begin[v] = static_cast<int>(build.vertex_edges.size());
     const int h0 = out_half[v];
     int h = h0;
     for (int guard = 0; guard < nh; ++guard) {
-      vertex_edges_.push_back(VertexEdge{edge_of_half[h], half_edges_[half_edges_[h].twin].origin});
-      h = half_edges_[half_edges_[h].twin].next;
+      build.vertex_edges.push_back(VertexEdge{edge_of_half[h], build.half_edges[build.half_edges[h].twin].origin});
+      h = build.half_edges[build.half_edges[h].twin].next;
       if (h == h0) break;
     }
   }
-  vertex_edge_begin_[nv] = static_cast<int>(vertex_edges_.size());
-  vertex_coords_.resize(3 * static_cast<std::size_t>(nv));
+  build.vertex_edge_begin[nv] = static_cast<int>(build.vertex_edges.size());
+  build.vertex_coords.resize(3 * static_cast<std::size_t>(nv));
   for (int i = 0; i < nv; ++i)
-    for (int axis = 0; axis < 3; ++axis) vertex_coords_[axis * nv + i] = vertices_[i][axis];
-  for (const Vec3& v : vertices_) vertex_centroid_ += v;
+    for (int axis = 0; axis < 3; ++axis) build.vertex_coords[axis * nv + i] = build.vertices[i][axis];
+  for (const Vec3& v : build.vertices) vertex_centroid_ += v;
   vertex_centroid_ /= static_cast<Real>(nv);
   outer_radius_ = 0;
-  for (const Vec3& v : vertices_) outer_radius_ = std::max(outer_radius_, (v - vertex_centroid_).norm());
+  for (const Vec3& v : build.vertices) outer_radius_ = std::max(outer_radius_, (v - vertex_centroid_).norm());
+
+  // ---- One block, each array on its own cache line, in the order collide_hull_hull
+  // reads them.
+  std::size_t bytes = 0;
+  auto place = [&bytes](const auto& v) {
+    const std::size_t at = bytes;
+    bytes += (v.size() * sizeof(v[0]) + 63) / 64 * 64;
+    return at;
+  };
+  const std::size_t at_coords = place(build.vertex_coords), at_faces = place(build.faces),
+                    at_vertices = place(build.vertices), at_arcs = place(build.edge_arcs),
+                    at_ring = place(build.vertex_edges), at_ring_begin = place(build.vertex_edge_begin),
+                    at_half = place(build.half_edges), at_edges = place(build.edges);
+  storage_.reset(static_cast<std::byte*>(::operator new[](bytes, std::align_val_t(64))));
+  auto copy = [this](const auto& v, std::size_t at) {
+    using T = std::decay_t<decltype(v[0])>;
+    T* out = reinterpret_cast<T*>(storage_.get() + at);
+    std::uninitialized_copy(v.begin(), v.end(), out);
+    return std::span<const T>(out, v.size());
+  };
+  vertex_coords_ = copy(build.vertex_coords, at_coords);
+  faces_ = copy(build.faces, at_faces);
+  vertices_ = copy(build.vertices, at_vertices);
+  edge_arcs_ = copy(build.edge_arcs, at_arcs);
+  vertex_edges_ = copy(build.vertex_edges, at_ring);
+  vertex_edge_begin_ = copy(build.vertex_edge_begin, at_ring_begin);
+  half_edges_ = copy(build.half_edges, at_half);
+  edges_ = copy(build.edges, at_edges);
 }
 
-std::vector<int> ConvexHull::face_vertices(int f) const {
-  std::vector<int> out;
-  const Face& face = faces_.at(f);
-  out.reserve(face.vertex_count);
-  int h = face.first_edge;
-  for (int k = 0; k < face.vertex_count; ++k) {
-    out.push_back(half_edges_[h].origin);
-    h = half_edges_[h].next;
-  }
-  return out;
-}
+std::vector<int> ConvexHull::face_vertices(int f) const { return loop_of(faces_, half_edges_, f); }
 
 int ConvexHull::support_index(const Vec3& dir) const {
   const int n = static_cast<int>(vertices_.size());

@@ -73,7 +73,7 @@ struct BruteSat {
 
 BruteSat brute_sat(const ConvexHull& a, const ConvexHull& b, const Pose& b_in_a) {
   BruteSat r;
-  const std::vector<Vec3>& va = a.vertices();
+  const std::vector<Vec3> va(a.vertices().begin(), a.vertices().end());
   std::vector<Vec3> vb;
   for (const Vec3& v : b.vertices()) vb.push_back(b_in_a.transform_point(v));
   for (const auto& f : a.faces()) r.face_a = std::max(r.face_a, -support(vb, -f.normal) - f.offset);

@@ -258,7 +258,8 @@ TEST(HardCases, TinyAndHugeShapes) {
                 return std::make_shared<Cylinder>(s * c.cylinder_radius(), s * c.half_height());
               }
               default: {
-                std::vector<Vec3> p = static_cast<const ConvexHull&>(sh).vertices();
+                const auto verts = static_cast<const ConvexHull&>(sh).vertices();
+                std::vector<Vec3> p(verts.begin(), verts.end());
                 for (Vec3& v : p) v *= s;
                 return std::make_shared<ConvexHull>(p);
               }

@@ -600,7 +600,7 @@ TEST(ConvexHull, IndependentOfInputOrder) {
   ConvexHull a(pts);
   std::shuffle(pts.begin(), pts.end(), rng);
   ConvexHull b(pts);
-  ASSERT_EQ(a.vertices(), b.vertices());
+  ASSERT_TRUE(std::ranges::equal(a.vertices(), b.vertices()));
   ASSERT_EQ(a.faces().size(), b.faces().size());
 }
 
