@@ -232,13 +232,19 @@ class ConvexHull final : public ConvexShape {
   /// colinear or coincident. Duplicate and interior points are dropped.
   explicit ConvexHull(const std::vector<Vec3>& points);
 
+  // The arrays below are views into the hull's own storage (one block, see the private
+  // members): valid as long as the hull lives.
+
+  /// The hull's vertices (m, hull frame): the input points that are corners of it.
   std::span<const Vec3> vertices() const { return vertices_; }
+  /// Its faces (planes in the hull frame, coplanar triangles merged).
   std::span<const Face> faces() const { return faces_; }
   /// Distance tolerance the hull was built with (unit: m): input points within it of
   /// the hull were treated as on it and dropped, face vertices lie within 2x it of their
   /// face plane. 6 * DBL_EPSILON * (max|x| + max|y| + max|z|) of the input, raised by
   /// 1e3 or 1e6 only for clouds that are degenerate within round-off.
   Real tolerance() const { return tolerance_; }
+  /// The faces' loops: half-edge f.first_edge and its `next`s go CCW round face f.
   std::span<const HalfEdge> half_edges() const { return half_edges_; }
   /// One half-edge index per undirected edge (the one with the smaller index of each twin pair).
   std::span<const int> edges() const { return edges_; }
