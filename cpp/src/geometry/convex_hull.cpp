@@ -56,10 +56,10 @@
 #include <cmath>
 #include <memory>
 #include <new>
-#include <span>
-#include <stdexcept>
 #include <numeric>
+#include <span>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 #include <unordered_map>
 
