@@ -492,7 +492,6 @@ ConvexHull::ConvexHull(const std::vector<Vec3>& points) : ConvexShape(ShapeType:
     build.faces.clear();
     build.half_edges.clear();
     build.edges.clear();
-    vertex_neighbors_.clear();
     QuickhullBuilder qh(p, tol);
     qh.build(i0, i1, i2, i3);
 
@@ -691,17 +690,16 @@ ConvexHull::ConvexHull(const std::vector<Vec3>& points) : ConvexShape(ShapeType:
       build.half_edges[h].twin = it == edge_of.end() ? -1 : it->second;
       if (it != edge_of.end() && h < it->second) build.edges.push_back(h);
     }
-    vertex_neighbors_.assign(build.vertices.size(), {});
-    for (const HalfEdge& h : build.half_edges)
-      vertex_neighbors_[h.origin].push_back(build.half_edges[h.next].origin);
+    std::vector<int> out_degree(build.vertices.size(), 0);  // half-edges leaving each vertex
+    for (const HalfEdge& h : build.half_edges) ++out_degree[h.origin];
 
     // Validation: closed (every half-edge has a twin), genus 0, vertices of degree >= 3,
     // every face loop convex
     // and CCW about its normal, and every vertex of each neighbouring face on or behind
     // the face's plane. Local convexity of a closed surface implies global convexity.
     const Real check = 4 * eps_merge;
-    for (const auto& nb : vertex_neighbors_)
-      if (nb.size() < 3) return false;  // every vertex a corner
+    for (const int d : out_degree)
+      if (d < 3) return false;  // every vertex a corner
     for (int h = 0; h < static_cast<int>(build.half_edges.size()); ++h) {
       const int t = build.half_edges[h].twin;
       if (t < 0 || build.half_edges[t].twin != h) return false;
@@ -832,11 +830,13 @@ int ConvexHull::support_index(const Vec3& dir) const {
   // Hill climbing on the vertex graph (Cameron 1997, "Enhancing GJK"): on a convex
   // polytope a vertex with no better neighbour is a global maximum of dot(x, dir).
   // Each move strictly increases the value, so it visits every vertex at most once.
+  // A vertex's neighbours are the other ends of the edges around it (vertex_edges_).
   int cur = 0;
   Real cur_d = vertices_[0].dot(dir);
   for (int step = 0; step < n; ++step) {
     int best = cur;
-    for (int nb : vertex_neighbors_[cur]) {
+    for (int j = vertex_edge_begin_[cur], end = vertex_edge_begin_[cur + 1]; j < end; ++j) {
+      const int nb = vertex_edges_[j].other;
       const Real d = vertices_[nb].dot(dir);
       if (d > cur_d) {
         cur_d = d;

@@ -306,7 +306,6 @@ class ConvexHull final : public ConvexShape {
   std::span<const int> vertex_edge_begin_;
   std::span<const HalfEdge> half_edges_;
   std::span<const int> edges_;
-  std::vector<std::vector<int>> vertex_neighbors_;  // for hill-climbing support on large hulls
   Vec3 vertex_centroid_ = Vec3::Zero();
   Real outer_radius_ = 0;
   Aabb aabb_;
