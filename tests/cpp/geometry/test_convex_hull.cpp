@@ -612,22 +612,22 @@ TEST(ConvexHull, ArraysLieInOneBlockEachOnItsOwnCacheLine) {
   std::mt19937_64 rng(31);
   std::vector<Vec3> pts;
   for (int i = 0; i < 20; ++i) pts.push_back(random_unit(rng));
-  auto h = std::make_unique<ConvexHull>(pts);
+  const ConvexHull h(pts);
   auto start = [](auto span) { return reinterpret_cast<std::uintptr_t>(span.data()); };
   auto end = [](auto span) { return reinterpret_cast<std::uintptr_t>(span.data() + span.size()); };
   auto line_after = [](std::uintptr_t e) { return (e + 63) / 64 * 64; };
-  const std::uintptr_t in_order[] = {start(h->vertex_coords()), end(h->vertex_coords()), start(h->faces()),
-                                     end(h->faces()), start(h->vertices()), end(h->vertices()),
-                                     start(h->edge_arcs()), end(h->edge_arcs()), start(h->vertex_edges()),
-                                     end(h->vertex_edges()), start(h->vertex_edge_begin()),
-                                     end(h->vertex_edge_begin()), start(h->half_edges()), end(h->half_edges()),
-                                     start(h->edges())};
+  const std::uintptr_t in_order[] = {start(h.vertex_coords()), end(h.vertex_coords()), start(h.faces()),
+                                     end(h.faces()), start(h.vertices()), end(h.vertices()),
+                                     start(h.edge_arcs()), end(h.edge_arcs()), start(h.vertex_edges()),
+                                     end(h.vertex_edges()), start(h.vertex_edge_begin()),
+                                     end(h.vertex_edge_begin()), start(h.half_edges()), end(h.half_edges()),
+                                     start(h.edges())};
   for (int k = 0; k < 15; k += 2) EXPECT_EQ(in_order[k] % 64, 0u) << "array " << k / 2;
   for (int k = 1; k < 15; k += 2) EXPECT_EQ(in_order[k + 1], line_after(in_order[k])) << "array " << k / 2 + 1;
   // The contents are the hull's: the coordinate arrays mirror the vertices.
-  const std::size_t n = h->vertices().size();
+  const std::size_t n = h.vertices().size();
   for (std::size_t i = 0; i < n; ++i)
-    for (int axis = 0; axis < 3; ++axis) EXPECT_EQ(h->vertex_coords()[axis * n + i], h->vertices()[i][axis]);
+    for (int axis = 0; axis < 3; ++axis) EXPECT_EQ(h.vertex_coords()[axis * n + i], h.vertices()[i][axis]);
 }
 
 }  // namespace
