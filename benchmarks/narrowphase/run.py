@@ -261,11 +261,21 @@ def main() -> int:
             print(f"  {r['pair']:<18} reference {r['reference']:<18} median |ref - libccd gjk/epa| "
                   f"{fmt_err(num(r['median_diff_libccd_gjk_epa']))}  |ref - libccd mpr| "
                   f"{fmt_err(num(r['median_diff_libccd_mpr']))}")
-    plot_times(rows, out / "narrowphase_time.png")
+    # A binary run for some methods only (WMO_BENCH_METHODS) or pairs may leave a table
+    # without rows: say so instead of drawing an empty figure.
+    wrote = []
+    if rows:
+        plot_times(rows, out / "narrowphase_time.png")
+        wrote.append(out / "narrowphase_time.png")
     sweep = read_csv(out / "tolerance_sweep.csv")
-    print_matched(matched_accuracy(sweep), out / "matched_accuracy.csv")
-    plot_sweep(sweep, out / "tolerance_sweep.png")
-    print(f"\n[run.py] wrote {out / 'narrowphase_time.png'} and {out / 'tolerance_sweep.png'}")
+    if sweep:
+        print_matched(matched_accuracy(sweep), out / "matched_accuracy.csv")
+        plot_sweep(sweep, out / "tolerance_sweep.png")
+        wrote.append(out / "tolerance_sweep.png")
+    else:
+        print("\n[run.py] tolerance_sweep.csv has no rows (no GJK/EPA method was run): no sweep plot or "
+              "equal-accuracy table")
+    print(f"\n[run.py] wrote {', '.join(str(p) for p in wrote) or 'no plots'}")
     return 0
 
 
