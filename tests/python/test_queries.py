@@ -258,6 +258,33 @@ def test_collide_mesh_capsule_through_the_plane_is_pushed_out_the_near_side(tilt
     assert max(max(m.depths) for m in ms) == pytest.approx(depth, abs=1e-9)
 
 
+def test_collide_two_sided_mesh_hull_in_a_valley_is_not_pushed_through_the_next_triangle():
+    # Three triangles of a rolling two-sided ground (scripts/fuzz_worlds.py seed 2305,
+    # beside a wall at x = -10) and a 67 kg hull resting 5 mm deep in triangles 1 and 2,
+    # overlapping triangle 0 by 8 mm just past the valley edge they share. EPA's way out
+    # of triangle 0 alone is sideways past that edge, leaning 17 degrees to the sheet's
+    # back; taken as the side, the contact pushed the hull down through the ground
+    # along triangle 1's back normal, 0.33 m deep, and the fuzz scene lost it. The
+    # hull's centre and nearly all of it (0.61 m against 0.01) are in front of triangle
+    # 0: every triangle must push it out through its front, by millimetres.
+    v = np.array([[-10, 0.099721, -6], [-10, -0.343116, -4], [-10, 0.185853, -2], [-8, -0.343116, -6],
+                  [-8, 0.185853, -4]])
+    mesh = wmo.TriangleMesh(v, [[0, 1, 3], [1, 4, 3], [1, 2, 4]], one_sided=False)
+    hull = wmo.ConvexHull([[0.01962, -0.151863, 0.331565], [-0.173444, 0.153552, 0.100027],
+                           [-0.092293, -0.005649, -0.325178], [0.17862, 0.09206, -0.137871],
+                           [0.064329, 0.346146, 0.024833], [0.025816, 0.266499, -0.24705],
+                           [0.083612, 0.202499, -0.264345]])
+    ms = G.collide_all(mesh, ORIGIN, hull, wmo.Pose(position=(-9.789023, -0.116039, -3.834081),
+                                                    orientation=(-0.652217, 0.361937, 0.236075, -0.622803)))
+    assert sorted(m.child_a for m in ms) == [0, 1, 2]
+    for m in ms:
+        a, b, c = v[[[0, 1, 3], [1, 4, 3], [1, 2, 4]][m.child_a]]
+        n = np.cross(b - a, c - a)
+        n /= np.linalg.norm(n)
+        np.testing.assert_allclose(m.normal, n, atol=1e-9)
+        assert 0 < max(m.depths) < 0.015
+
+
 # ---------------------------------------------------------------- unsupported pairs
 
 @pytest.mark.parametrize("a, b", [
