@@ -255,10 +255,14 @@ def test_energy_never_exceeds_what_the_system_started_with():
 
 
 @pytest.mark.xfail(strict=True, reason="issue 3, open: at the defaults 19 of 600 steps gain kinetic "
-                   "energy, the largest by 3.0e-8 relative (step 255): the boxes turn at constant angular "
-                   "velocity (gyroscopic term off), whose energy changes as they turn, and the rows' anchors "
-                   "turn between the biased and the relax passes; energy_guard_passes=8 (off by default, "
-                   "next test) leaves the same. The warm-started impact that gained 8.0e-4 here (a column "
+                   "energy, the largest by 3.0e-8 relative (step 255: a sphere on another, the soft contacts' "
+                   "push-out kept as velocity where the two relax passes do not converge, the chain tests "
+                   "below). With contact_push_max=0 (no push-out) 3 steps gain, up to 1.1e-9 (boxes turning "
+                   "with a corner on a wall: the rows' anchors turn between the biased and the relax passes); "
+                   "energy_guard_passes=8 (off by default, next test) leaves the same. Tried 2026-12-07: the "
+                   "relax passes restarted from the velocities and impulses before the biased pass (split "
+                   "impulses, emulated): 94 steps gained, up to 2.6e-3 (impacts in columns, left to the relax "
+                   "passes alone, bounced). The warm-started impact that gained 8.0e-4 here (a column "
                    "of three spheres in a corner: the contact that stopped an impact carried its impulse "
                    "into the next step, and the relax passes did not take it all back) no longer occurs in "
                    "this scene since the broadphase boxes are swept by the static motion margin (the walls' "
@@ -272,6 +276,44 @@ def test_energy_never_increases_from_one_step_to_the_next():
         e_next = w.kinetic_energy()
         assert e_next <= e * (1 + 1e-12), f"energy rose from {e} to {e_next} at step {k + 1}"
         e = e_next
+
+
+def _pushed_out_chain(**world_kwargs):
+    """Kinetic energy at the start and after each of 30 steps: two spheres (radius 0.3 m,
+    113 kg) stacked on a static floor with no gravity or friction, each 0.5 mm into what
+    is under it, the upper one approaching at 1.4 mm/s (0.11 mJ)."""
+    w = wmo.World(gravity=(0, 0, 0), sleeping=False, **world_kwargs)
+    w.add_body(wmo.Box((3, 0.5, 3)), position=(0, -0.5, 0), kind="static", friction=0.0)
+    w.add_body(wmo.Sphere(0.3), position=(0, 0.2995, 0), friction=0.0, density=1000)
+    w.add_body(wmo.Sphere(0.3), position=(0, 0.899, 0), linear_velocity=(0, -0.0014, 0), friction=0.0,
+               density=1000)
+    energies = [w.kinetic_energy()]
+    for _ in range(30):
+        w.step()
+        energies.append(w.kinetic_energy())
+    return np.array(energies)
+
+
+def test_a_pushed_out_chain_gains_no_energy_when_its_relax_passes_converge():
+    # The soft step pushes both overlaps out with a biased pass and then takes the push's
+    # velocity back with unbiased (relax) passes. Run to convergence (50 passes) the
+    # relax passes leave the chain no more energy than it had, and less, the approach
+    # being stopped: the mechanism is sound when solved exactly.
+    e = _pushed_out_chain(relax_iterations=50)
+    assert (np.diff(e) <= 1e-12 * e[0]).all()
+    assert e[-1] < 1e-6 * e[0]
+
+
+@pytest.mark.xfail(strict=True, reason="issue 3, open: at the defaults (two relax passes, Gauss-Seidel) the "
+                   "chain does not converge: the upper sphere keeps the push-out it got through the lower "
+                   "one and leaves at 5 mm/s, its energy 12 times what it had (1.4 mJ against 0.11), the "
+                   "closed box's largest gain (xfail above). 10 relax passes leave 0.2 mm/s, 50 none (test "
+                   "above). The remedy is a push-out kept out of the velocities that needs no convergence "
+                   "(split impulses done properly: the emulation in the xfail above lost the biased pass's "
+                   "help with impacts); not built yet")
+def test_a_pushed_out_chain_gains_no_energy_at_the_defaults():
+    e = _pushed_out_chain()
+    assert (np.diff(e) <= 1e-12 * e[0]).all()
 
 
 @pytest.mark.parametrize("gyroscopic", [False, True])
