@@ -72,11 +72,7 @@
 // speculative contact (B apart from T) whose side by the rule below (the larger part
 // of B, T's plane taken whole) is not the side of B's nearest point gives no contact:
 // that plane then cuts through B beyond T's edge and neither side is safe (seeds 1-200
-// of that fuzz: 5 lost a body before, 0 after; 201-400: 9 before, 2 after). And
-// without history, an overlap whose normal leans to one side of T while B's centre and
-// the larger part of B are on the other takes their side: such a normal is the way out
-// past one of T's edges, not through its plane (seed 2305: a hull in a valley was
-// pushed down through the next triangle).
+// of that fuzz: 5 lost a body before, 0 after; 201-400: 9 before, 2 after).
 // The rule is local to T and its three neighbours, so it is deterministic and needs no
 // second pass over the triangles (Jolt's collector needs one); its known limit is a
 // vertex whose two edges in T are internal while another edge at that vertex (in other
@@ -441,27 +437,9 @@ void collide_triangle(const MeshContext& ctx, int t, std::vector<Manifold>& out)
         N = adjusted;
         modified = true;
       }
-    } else {
-      // The side N leans to, unless B overlaps a two-sided T that nothing has pinned a
-      // side of (front == 0) with its centre and the larger part of it on the other
-      // side: then N is the way out through one of T's edges (sideways past it), and
-      // its lean says nothing about which side B is on. Taken as the side, a hull
-      // resting in a valley by a wall, overlapping the next triangle by 8 mm beyond
-      // the valley's edge (EPA: out past the edge, leaning 17 degrees to the back), was
-      // pushed down through the ground along the neighbour's back normal, 0.33 m deep,
-      // and lost (scripts/fuzz_worlds.py seed 2305, two-sided ground). Where the
-      // centre and the larger part disagree (B astride a ridge, T's plane cutting
-      // through it beyond T's edge) the lean stays the guide.
-      int side = nd > 0 ? 1 : -1;
-      if (!one_sided && front == 0 && r.distance <= 0 && side != centre_side) {
-        const Real below = offset + reach(-n);  // how far B reaches below T's plane
-        const Real above = reach(n) - offset;   // ... and above it
-        if (centre_side > 0 ? below < above : above < below) side = centre_side;
-      }
-      if (!allowed_on_side(ctx, t, v, n, side, N, adjusted)) {
-        N = adjusted;
-        modified = true;
-      }
+    } else if (!allowed_on_side(ctx, t, v, n, nd > 0 ? 1 : -1, N, adjusted)) {
+      N = adjusted;
+      modified = true;
     }
     if (modified && std::abs(N.dot(n)) >= 1 - sin_tol) {
       // N became T's face normal (a face, internal edge or internal vertex feature), on
