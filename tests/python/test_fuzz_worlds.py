@@ -102,23 +102,25 @@ def test_a_random_world_on_a_two_sided_mesh_ground_at_a_crease_holds(seed):
 
 @pytest.mark.parametrize("seed", [2989, 3113])
 def test_a_random_world_with_a_body_across_a_ridge_of_a_two_sided_mesh_ground_holds(seed):
-    # They hold, and a fix for seed 2305 (below) that took the side of a body's centre
-    # and its larger part over the lean of EPA's normal lost both: in 3113 a 1.8 m
-    # capsule lying on one triangle, its far end over the next beyond a ridge, its
-    # centre 2 cm behind that triangle's extended plane, was pushed down through it;
-    # in 2989 a 13 g hull was lost (not traced). Pinned so that the next fix is tried
-    # on them.
+    # These held until a first fix for seed 2305 (below) took the side of a body's
+    # centre and its larger part relative to the triangle's plane, which lost both: in
+    # 3113 a 1.8 m capsule lying on one triangle, its far end over the next one beyond a
+    # ridge and its centre 2 cm behind that triangle's extended plane, was pushed down
+    # through it; in 2989 a 13 g hull was lost (not traced). The rule kept (the
+    # centre's side relative to the sheet where the centre lies) holds them.
     _holds(seed, ("two-sided",))
 
 
-@pytest.mark.xfail(strict=True, reason="issue 3, open: seed 2305 (found 2026-12-07, the one loss of two-sided "
-                   "seeds 2001-2700): a 67 kg hull sliding along a wall's foot in a valley of the ground (dt "
-                   "1/30, one substep) reaches the next triangle, overlapping it by 8 mm past the valley edge; "
-                   "with no history for that triangle its side is the lean of EPA's normal, which points out "
-                   "past the edge and leans to the back, and the hull is pushed down through the ground, 0.33 "
-                   "m deep (test_queries.py pins the contact, with the fix tried and why it was withdrawn)")
 @pytest.mark.parametrize("seed", [2305])
 def test_a_random_world_with_a_hull_in_a_valley_of_a_two_sided_mesh_ground_holds(seed):
+    # Seed 2305 (found 2026-12-07, the one loss of two-sided seeds 2001-2700): a 67 kg
+    # hull sliding along a wall's foot in a valley of the ground (dt 1/30, one substep)
+    # reached the next triangle, overlapping it by 8 mm past the valley edge. With no
+    # history for that triangle its side was the lean of EPA's normal, which points out
+    # past the edge and leaned to the back: the hull was pushed 0.33 m down through the
+    # ground. An overlap of a two-sided triangle with no history now takes the side of
+    # the body's centre relative to the sheet where the centre lies (collide_mesh.cpp,
+    # sheet_side; test_queries.py pins the contact).
     _holds(seed, ("two-sided",))
 
 

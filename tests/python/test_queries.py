@@ -258,22 +258,15 @@ def test_collide_mesh_capsule_through_the_plane_is_pushed_out_the_near_side(tilt
     assert max(max(m.depths) for m in ms) == pytest.approx(depth, abs=1e-9)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 3, open: triangle 0 pushes the hull out through its back, 0.33 m "
-                   "deep (its side is the lean of EPA's normal, which points out past the valley edge). Tried "
-                   "2026-12-07: taking the side of the body's centre and its larger part where both disagree "
-                   "with the lean; it held this and fuzz seed 2305 but lost seeds 2989 and 3113, a 1.8 m "
-                   "capsule lying across a ridge, its centre 2 cm behind the next triangle's extended plane, "
-                   "pushed down through that triangle. Neither the lean nor the plane taken whole knows which "
-                   "side of the sheet the body is on near its edges; the triangles the body rests on do")
 def test_collide_two_sided_mesh_hull_in_a_valley_is_not_pushed_through_the_next_triangle():
     # Three triangles of a rolling two-sided ground (scripts/fuzz_worlds.py seed 2305,
     # beside a wall at x = -10) and a 67 kg hull resting 5 mm deep in triangles 1 and 2,
     # overlapping triangle 0 by 8 mm just past the valley edge they share. EPA's way out
     # of triangle 0 alone is sideways past that edge, leaning 17 degrees to the sheet's
-    # back; taken as the side, the contact pushes the hull down through the ground
-    # along triangle 1's back normal, 0.33 m deep, and the fuzz scene loses it. The
-    # hull's centre and nearly all of it (0.61 m against 0.01) are in front of triangle
-    # 0: every triangle should push it out through its front, by millimetres.
+    # back; taken as the side, the contact pushed the hull down through the ground
+    # along triangle 1's back normal, 0.33 m deep, and the fuzz scene lost it. The
+    # hull's centre lies beyond that edge, in front of triangle 1 (the sheet where it
+    # is): every triangle must push it out through its front, by millimetres.
     v = np.array([[-10, 0.099721, -6], [-10, -0.343116, -4], [-10, 0.185853, -2], [-8, -0.343116, -6],
                   [-8, 0.185853, -4]])
     mesh = wmo.TriangleMesh(v, [[0, 1, 3], [1, 4, 3], [1, 2, 4]], one_sided=False)
