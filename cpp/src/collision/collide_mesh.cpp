@@ -72,7 +72,12 @@
 // speculative contact (B apart from T) whose side by the rule below (the larger part
 // of B, T's plane taken whole) is not the side of B's nearest point gives no contact:
 // that plane then cuts through B beyond T's edge and neither side is safe (seeds 1-200
-// of that fuzz: 5 lost a body before, 0 after; 201-400: 9 before, 2 after).
+// of that fuzz: 5 lost a body before, 0 after; 201-400: 9 before, 2 after). Without
+// history, an overlap whose normal is not T's face normal takes the side of B's centre
+// relative to the sheet where the centre lies (sheet_side), not the lean of the
+// normal, which near an edge is the way out past it (seed 2305: a hull in a valley was
+// pushed down through the next triangle), nor T's plane taken whole, which a ridge
+// makes cut through a body resting beside it (seed 3113).
 // The rule is local to T and its three neighbours, so it is deterministic and needs no
 // second pass over the triangles (Jolt's collector needs one); its known limit is a
 // vertex whose two edges in T are internal while another edge at that vertex (in other
@@ -319,15 +324,18 @@ bool allowed_on_side(const MeshContext& ctx, int t, const std::array<Vec3, 3>& v
   return N.dot(edge_outward(v, n, internal)) <= sin_tol;
 }
 
-// The side (+1 front, -1 back) of B's centre relative to the sheet where the centre
-// lies: T's plane if the centre projects onto T; beyond an edge of T (the one it lies
+// The side (+1 front, -1 back) of B's centre (its bounding box's) relative to the
+// sheet where the centre lies: T's plane if the centre projects onto T; beyond an edge of T (the one it lies
 // farthest beyond, in T's plane), the plane of the neighbour across that edge, whose
 // front agrees with T's (neighbours are consistently wound, TriangleMesh); T's plane
 // again beyond a boundary edge. Near T's edges T's plane, extended past them, can cut
 // the body's side wrongly (a ridge puts a body resting beside it behind the next
 // flank's plane); the neighbour's plane is the sheet there.
 int sheet_side(const MeshContext& ctx, int t, const std::array<Vec3, 3>& v, const Vec3& n) {
-  const Vec3& c = ctx.b_in_a.position;
+  // B's centre: the middle of its local bounding box (a hull's origin, which its
+  // points need not surround, may lie outside it).
+  const Aabb box = ctx.b.local_aabb();
+  const Vec3 c = ctx.b_in_a.transform_point(0.5 * (box.min + box.max));
   int beyond = -1;
   Real farthest = 0;
   for (int e = 0; e < 3; ++e) {
