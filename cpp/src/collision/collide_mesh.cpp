@@ -324,13 +324,13 @@ bool allowed_on_side(const MeshContext& ctx, int t, const std::array<Vec3, 3>& v
   return N.dot(edge_outward(v, n, internal)) <= sin_tol;
 }
 
-// The side (+1 front, -1 back) of B's centre (its bounding box's) relative to the
-// sheet where the centre lies: T's plane if the centre projects onto T; beyond an edge of T (the one it lies
+// The side (+1 front, -1 back) of B's centre relative to the sheet where the centre
+// lies: T's plane if the centre projects onto T; beyond an edge of T (the one it lies
 // farthest beyond, in T's plane), the plane of the neighbour across that edge, whose
 // front agrees with T's (neighbours are consistently wound, TriangleMesh); T's plane
-// again beyond a boundary edge. Near T's edges T's plane, extended past them, can cut
-// the body's side wrongly (a ridge puts a body resting beside it behind the next
-// flank's plane); the neighbour's plane is the sheet there.
+// again beyond a boundary edge. Near T's edges T's plane, extended past them, can
+// misjudge the side: a ridge puts a body resting beside it behind the next flank's
+// plane (seed 3113: a 1.8 m capsule lying across a ridge, its centre 2 cm behind it).
 int sheet_side(const MeshContext& ctx, int t, const std::array<Vec3, 3>& v, const Vec3& n) {
   // B's centre: the middle of its local bounding box (a hull's origin, which its
   // points need not surround, may lie outside it).
@@ -472,14 +472,10 @@ void collide_triangle(const MeshContext& ctx, int t, std::vector<Manifold>& out)
     } else {
       // The side N leans to, except for an overlap of a two-sided T that no history
       // has pinned (front == 0): there N may be the way out past one of T's edges,
-      // whose lean says nothing about which side of the sheet B is on, and the side is
-      // that of B's centre relative to the sheet where the centre lies (sheet_side).
-      // Taking the lean, a hull in a valley by a wall, overlapping the next triangle by
-      // 8 mm past the valley's edge (EPA: out past the edge, leaning 17 degrees to the
-      // back), was pushed 0.33 m down through the ground and lost (fuzz_worlds.py seed
-      // 2305); taking T's plane whole (the centre's side and the larger part's), a
-      // 1.8 m capsule lying across a ridge, its centre 2 cm behind the next triangle's
-      // extended plane, was (seed 3113).
+      // whose lean says nothing about the side (seed 2305: a hull in a valley,
+      // overlapping the next triangle by 8 mm past the valley's edge, EPA's normal
+      // leaning 17 degrees to the back, was pushed 0.33 m down through the ground), and
+      // the side is that of B's centre relative to the sheet (sheet_side).
       const int side = !one_sided && front == 0 && r.distance <= 0 ? sheet_side(ctx, t, v, n)
                                                                  : (nd > 0 ? 1 : -1);
       if (!allowed_on_side(ctx, t, v, n, side, N, adjusted)) {
