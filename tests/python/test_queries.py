@@ -269,7 +269,8 @@ def test_collide_two_sided_mesh_hull_in_a_valley_is_not_pushed_through_the_next_
     # is): every triangle must push it out through its front, by millimetres.
     v = np.array([[-10, 0.099721, -6], [-10, -0.343116, -4], [-10, 0.185853, -2], [-8, -0.343116, -6],
                   [-8, 0.185853, -4]])
-    mesh = wmo.TriangleMesh(v, [[0, 1, 3], [1, 4, 3], [1, 2, 4]], one_sided=False)
+    tris = [[0, 1, 3], [1, 4, 3], [1, 2, 4]]
+    mesh = wmo.TriangleMesh(v, tris, one_sided=False)
     hull = wmo.ConvexHull([[0.01962, -0.151863, 0.331565], [-0.173444, 0.153552, 0.100027],
                            [-0.092293, -0.005649, -0.325178], [0.17862, 0.09206, -0.137871],
                            [0.064329, 0.346146, 0.024833], [0.025816, 0.266499, -0.24705],
@@ -278,7 +279,7 @@ def test_collide_two_sided_mesh_hull_in_a_valley_is_not_pushed_through_the_next_
                                                     orientation=(-0.652217, 0.361937, 0.236075, -0.622803)))
     assert sorted(m.child_a for m in ms) == [0, 1, 2]
     for m in ms:
-        a, b, c = v[[[0, 1, 3], [1, 4, 3], [1, 2, 4]][m.child_a]]
+        a, b, c = v[tris[m.child_a]]
         n = np.cross(b - a, c - a)
         n /= np.linalg.norm(n)
         np.testing.assert_allclose(m.normal, n, atol=1e-9)
