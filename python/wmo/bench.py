@@ -112,6 +112,41 @@ def _version() -> str:
 
 # ---- PyBullet --------------------------------------------------------------------------
 
+def pybullet_contact_rows(rows: list[tuple]) -> list[tuple]:
+    """The genuine rows of an unfiltered ``pybullet.getContactPoints()``.
+
+    PyBullet's server sends contact points in chunks of at most 47,661 rows (an 8 MiB
+    buffer), and every chunk, the last included, is a full chunk: past the real points it
+    copies whatever lies beyond the end of its cache (zeros, garbage, or real-looking rows
+    left there by an earlier query or an earlier client in the same process). The
+    pyramid's first step has 62,400 points and returns 95,322 rows. The real rows are a
+    prefix, one contiguous group of at most 4 per manifold (one manifold per pair of
+    convex bodies), in the server's manifold order; the prefix ends at the first row that
+    is malformed (a link other than the base, a body against itself, a non-finite value),
+    that returns to a pair seen in an earlier group, or that makes a group longer than
+    4 points. A stale row that continues the last pair's group within 4 points, or names a
+    pair with no real contact, is not caught; both need a manifold that has vanished."""
+    out: list[tuple] = []
+    seen: set[tuple[int, int]] = set()
+    last, run = None, 0
+    for c in rows:
+        if not (c[3] == -1 and c[4] == -1 and c[1] != c[2] and math.isfinite(c[8])
+                and all(map(math.isfinite, c[5])) and all(map(math.isfinite, c[6]))):
+            break
+        key = (c[1], c[2])
+        if key == last:
+            run += 1
+            if run > 4:
+                break
+        else:
+            if key in seen:
+                break
+            seen.add(key)
+            last, run = key, 1
+        out.append(c)
+    return out
+
+
 def step_pybullet(spec: _scenes.BoxScene, dt: float, iterations: int, substeps: int,
                   sleeping: bool) -> Iterator[EngineRun]:
     import pybullet as pb  # optional peer
@@ -149,13 +184,7 @@ def step_pybullet(spec: _scenes.BoxScene, dt: float, iterations: int, substeps: 
             t0 = time.perf_counter()
             pb.stepSimulation(physicsClientId=cid)
             t1 = time.perf_counter()
-            # getContactPoints returns uninitialised rows (link indices other than -1,
-            # body ids out of range, NaN positions) once a scene holds tens of thousands
-            # of points (6392 of 95322 on the pyramid's first step); only well-formed
-            # rows (base links of two distinct bodies, finite values) are counted.
-            cps = [c for c in pb.getContactPoints(physicsClientId=cid)
-                   if c[3] == -1 and c[4] == -1 and c[1] != c[2] and math.isfinite(c[8])
-                   and all(map(math.isfinite, c[5])) and all(map(math.isfinite, c[6]))]
+            cps = pybullet_contact_rows(pb.getContactPoints(physicsClientId=cid))
             pen = max([-c[8] for c in cps] + [0.0])
             # PyBullet does not report activation states: with sleeping on the awake
             # count is unknown (-1 in the CSV).

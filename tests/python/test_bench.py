@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import importlib.util
+import math
 import subprocess
 import sys
 
@@ -51,6 +52,28 @@ def test_interleaved_turns_give_each_engine_the_same_steps_as_running_alone(monk
         assert [x.step for x in t.records] == list(range(1, 13)), t.engine
         assert [(x.contacts, x.max_penetration) for x in t.records] == \
             [(x.contacts, x.max_penetration) for x in a.records], t.engine
+
+
+def _row(a, b, x=0.0, dist=-1e-3):
+    # getContactPoints' layout: flag, body A, body B, link A, link B, point on A, point on B,
+    # normal on B, distance, normal force, ...
+    return (0, a, b, -1, -1, (x, 0.0, 0.0), (x, 0.0, 0.0), (0.0, 1.0, 0.0), dist, 1.0)
+
+
+def test_pybullet_rows_stop_where_the_server_ran_past_its_points():
+    real = [_row(0, 1, 0.1), _row(0, 1, 0.2), _row(1, 2, 0.3), _row(2, 3, 0.4), _row(2, 3, 0.5)]
+    assert bench.pybullet_contact_rows(real) == real
+    # Zeros past the end (a fresh cache): a body against itself.
+    assert bench.pybullet_contact_rows(real + [(0, 0, 0, 0, 0, (0.0,) * 3, (0.0,) * 3, (0.0,) * 3, 0.0, 0.0)] * 3) == real
+    # Rows left by an earlier query: a pair already seen, even when well formed.
+    assert bench.pybullet_contact_rows(real + [_row(1, 2, 0.35), _row(7, 8)]) == real
+    # Garbage: an out-of-range link, a NaN distance.
+    bad_link = (0, 4, 5, 3, -1, (0.0,) * 3, (0.0,) * 3, (0.0,) * 3, -1e-3, 0.0)
+    assert bench.pybullet_contact_rows(real + [bad_link, _row(4, 5)]) == real
+    assert bench.pybullet_contact_rows(real + [_row(4, 5, dist=math.nan)]) == real
+    # A manifold holds at most 4 points: a fifth row of the last pair is stale.
+    assert bench.pybullet_contact_rows(real + [_row(2, 3, 0.6), _row(2, 3, 0.7), _row(2, 3, 0.8)]) == \
+        real + [_row(2, 3, 0.6), _row(2, 3, 0.7)]
 
 
 def test_bad_arguments_are_refused():
