@@ -62,18 +62,32 @@ def _row(a, b, x=0.0, dist=-1e-3):
 
 def test_pybullet_rows_stop_where_the_server_ran_past_its_points():
     real = [_row(0, 1, 0.1), _row(0, 1, 0.2), _row(1, 2, 0.3), _row(2, 3, 0.4), _row(2, 3, 0.5)]
-    assert bench.pybullet_contact_rows(real) == real
+
+    def rows(extra, now=real):
+        # What getContactPoints returns: the real rows, then what lay past them; and the
+        # call filtered to a pair, which returns that pair's real rows only.
+        return bench.pybullet_contact_rows(real + extra, lambda a, b: [r for r in now if r[1:3] == (a, b)])
+
+    assert rows([]) == real
     # Zeros past the end (a fresh cache): a body against itself.
-    assert bench.pybullet_contact_rows(real + [(0, 0, 0, 0, 0, (0.0,) * 3, (0.0,) * 3, (0.0,) * 3, 0.0, 0.0)] * 3) == real
+    assert rows([(0, 0, 0, 0, 0, (0.0,) * 3, (0.0,) * 3, (0.0,) * 3, 0.0, 0.0)] * 3) == real
     # Rows left by an earlier query: a pair already seen, even when well formed.
-    assert bench.pybullet_contact_rows(real + [_row(1, 2, 0.35), _row(7, 8)]) == real
+    assert rows([_row(1, 2, 0.35), _row(7, 8)]) == real
     # Garbage: an out-of-range link, a NaN distance.
     bad_link = (0, 4, 5, 3, -1, (0.0,) * 3, (0.0,) * 3, (0.0,) * 3, -1e-3, 0.0)
-    assert bench.pybullet_contact_rows(real + [bad_link, _row(4, 5)]) == real
-    assert bench.pybullet_contact_rows(real + [_row(4, 5, dist=math.nan)]) == real
-    # A manifold holds at most 4 points: a fifth row of the last pair is stale.
-    assert bench.pybullet_contact_rows(real + [_row(2, 3, 0.6), _row(2, 3, 0.7), _row(2, 3, 0.8)]) == \
-        real + [_row(2, 3, 0.6), _row(2, 3, 0.7)]
+    assert rows([bad_link, _row(4, 5)]) == real
+    assert rows([_row(4, 5, dist=math.nan)]) == real
+    # A manifold holds at most 4 points, none twice: past that, the rows are stale.
+    assert rows([_row(2, 3, 0.5)]) == real
+    # Stale rows of pairs with no real contact now (an earlier client's later step: new
+    # contacts it had made), or continuing the last group with points it no longer has:
+    # well formed, new pairs, yet not what the pair's own call returns.
+    assert rows([_row(5, 6, 0.1), _row(5, 6, 0.2), _row(6, 7, 0.3)]) == real
+    assert rows([_row(2, 3, 0.6), _row(2, 3, 0.7), _row(8, 9)]) == real
+    # The real rows themselves are all kept, however many pairs.
+    many = [_row(i, i + 1, 0.1 * k) for i in range(1, 40) for k in range(1 + i % 4)]
+    assert bench.pybullet_contact_rows(many + [_row(50, 51)],
+                                       lambda a, b: [r for r in many if r[1:3] == (a, b)]) == many
 
 
 def test_bad_arguments_are_refused():
