@@ -120,13 +120,19 @@ constexpr int kMaxPoints = std::tuple_size_v<decltype(ContactConstraint{}.points
 struct RowTarget {
   Real bias = 0, mass_scale = 1, impulse_scale = 0;
 };
+/// The soft bias of an overlap s <= 0 (m/s): the spring's, and past the constraint's
+/// allowance the excess within the substep (ContactConstraint::allow), under push_max.
+inline Real soft_bias(const Softness& soft, Real s, Real inv_h, Real push_max, Real allow) {
+  return std::max(std::min(soft.bias_rate * s, (s + allow) * inv_h), -push_max);
+}
+
 inline RowTarget row_target(const Softness& soft, Real s, Real inv_h, Real push_max, bool use_bias,
-                            Real stiff) {
+                            Real stiff, Real allow) {
   RowTarget t;
   if (s > 0) {
     t.bias = s * inv_h;
   } else if (use_bias) {
-    t.bias = std::max(soft.bias_rate * s, -push_max);
+    t.bias = soft_bias(soft, s, inv_h, push_max, allow);
     t.mass_scale = soft.mass_scale;
     t.impulse_scale = soft.impulse_scale;
     if (stiff > 1) {  // stiffening(): the spring's a2 times stiff
@@ -220,7 +226,7 @@ bool solve_normal_block(ContactConstraint& c, BodyState& a, BodyState& b, const 
     const ContactConstraintPoint& p = c.points[i];
     if (!(K[i][i] > 0)) return false;  // a point that moves nothing: leave it to the rows
     sep[i] = separation_now(a, b, p, n, ra[i], rb[i]);
-    const RowTarget t = row_target(soft, sep[i], inv_h, push_max, use_bias, p.stiffening);
+    const RowTarget t = row_target(soft, sep[i], inv_h, push_max, use_bias, p.stiffening, c.allow);
     gam[i] = std::max(K[i][i] * (1 / t.mass_scale - 1), kBlockRegularisation * K[i][i]);
     vn[i] = n.dot(relative_velocity(a, b, ra[i], rb[i]));
     Real kl = 0;
@@ -297,7 +303,7 @@ bool solve_normal_block(ContactConstraint& c, BodyState& a, BodyState& b, const 
 /// <= 0: a speculative point must not push); d keeps every accumulated impulse >= 0.
 /// WideContacts::solve computes the same lane by lane (from the anchors' centroid and
 /// masses of its last set_motion).
-void centroid_row(ContactConstraint& c, BodyState& a, BodyState& b, const Softness& soft, Real push_max,
+void centroid_row(ContactConstraint& c, BodyState& a, BodyState& b, const Softness& soft, Real inv_h, Real push_max,
                   bool use_bias, const std::array<Vec3, kMaxPoints>& ra, const std::array<Vec3, kMaxPoints>& rb) {
   const Vec3& n = c.normal;
   const int m = c.count;
@@ -311,7 +317,7 @@ void centroid_row(ContactConstraint& c, BodyState& a, BodyState& b, const Softne
     const Real kii = mass > 0 ? 1 / mass : 0;
     const Real a_soft = p.stiffening * soft.a2;
     const Real g = use_bias && a_soft > 0 ? kii / a_soft : 0;
-    if (use_bias) sum_bias += std::max(soft.bias_rate * s, -push_max);
+    if (use_bias) sum_bias += soft_bias(soft, s, inv_h, push_max, c.allow);
     sum_gl += g * p.normal_impulse;
     sum_g += g;
     min_l = std::min(min_l, p.normal_impulse);
@@ -356,7 +362,7 @@ void solve_contacts(std::vector<ContactConstraint>& cs, std::vector<BodyState>& 
     if (normal_rows == NormalRows::kBlock && c.count >= 2)
       block_done = solve_normal_block(c, a, b, soft, inv_h, push_max, use_bias, anchor_a, anchor_b);
     if (!block_done && centroid_rows && c.count >= 2)
-      centroid_row(c, a, b, soft, push_max, use_bias, anchor_a, anchor_b);
+      centroid_row(c, a, b, soft, inv_h, push_max, use_bias, anchor_a, anchor_b);
     for (int ii = 0; ii < c.count && !block_done; ++ii) {
       // A backward pass visits the points backward too (symmetric Gauss-Seidel within
       // the manifold as across the constraints).
@@ -368,7 +374,7 @@ void solve_contacts(std::vector<ContactConstraint>& cs, std::vector<BodyState>& 
       const Vec3& rb = anchor_b[i];
       const Real s = separation_now(a, b, p, n, ra, rb);
       const Real normal_mass = row_mass(p.normal_mass, effective_mass(a, b, ra, rb, n), turn_sin2(a, b));
-      const RowTarget t = row_target(soft, s, inv_h, push_max, use_bias, p.stiffening);
+      const RowTarget t = row_target(soft, s, inv_h, push_max, use_bias, p.stiffening, c.allow);
       const Real vn = n.dot(relative_velocity(a, b, ra, rb));
       Real impulse = -normal_mass * t.mass_scale * (vn + t.bias) - t.impulse_scale * p.normal_impulse;
       const Real next = std::max(p.normal_impulse + impulse, Real(0));

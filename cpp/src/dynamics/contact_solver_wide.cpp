@@ -64,6 +64,7 @@ WMO_INLINE void st(float* p, v8 v) { std::memcpy(p, &v, sizeof v); }
 WMO_INLINE v8 splat(float x) { return v8{x, x, x, x, x, x, x, x}; }
 /// std::max(a, b) lane by lane: (a < b) ? b : a.
 WMO_INLINE v8 vmax(v8 a, v8 b) { return a < b ? b : a; }
+WMO_INLINE v8 vmin(v8 a, v8 b) { return a < b ? a : b; }
 /// Square root lane by lane. This file is compiled without errno for the math
 /// functions (CMakeLists.txt), so the loop becomes one vector square root (correctly
 /// rounded, as std::sqrt).
@@ -352,6 +353,10 @@ WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, SoftLanes dyn,
     Bodies a = gather_velocities(g.row_a, rows), b = gather_velocities(g.row_b, rows);
     const Masses m = ld_masses(g);
     const V3 n = ld3(g.n);
+    const v8 allow = ld(g.allow);
+    // soft_bias() of contact_solver.cpp: the spring's, and past the allowance the
+    // excess within the substep, under push_max.
+    auto lane_bias = [&](v8 s) { return vmax(vmin(bias_rate * s, (s + allow) * vinv_h), neg_push); };
     if (centroid_rows && g.points >= 2) {
       // The centroid row (centroid_row() of contact_solver.cpp, which says why): one
       // impulse increment d at every point of the manifold that meets the rows'
@@ -374,7 +379,7 @@ WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, SoftLanes dyn,
         if (use_bias) {
           const v8 mass = ld(p.mass_now);
           const v8 gi = real & (mass > zero) ? g_scale / mass : zero;
-          sum = sum + (real ? vmax(bias_rate * s, neg_push) : zero) + gi * ni;
+          sum = sum + (real ? lane_bias(s) : zero) + gi * ni;
           sum_g = sum_g + gi;
         }
       }
@@ -425,7 +430,7 @@ WMO_CLONES void solve_groups(Group* groups, int count, Row* rows, SoftLanes dyn,
       // s > 0: speculative (bias s / h, full mass, no decay); otherwise the soft bias
       // when use_bias, else none.
       const m8 spec = s > zero;
-      const v8 soft_bias = use_bias ? vmax(bias_rate * s, neg_push) : zero;
+      const v8 soft_bias = use_bias ? lane_bias(s) : zero;
       const v8 bias = spec ? s * vinv_h : soft_bias;
       v8 row_mass_scale = soft_mass, row_impulse_scale = soft_impulse;
       if (use_bias && g.stiffened) {  // row_target() of contact_solver.cpp
@@ -731,6 +736,7 @@ void WideContacts::build(const std::vector<ContactConstraint>& cs, const std::ve
         g.t2[r][lanes] = static_cast<float>(c.tangent2[r]);
       }
       g.mu[lanes] = static_cast<float>(c.friction);
+      g.allow[lanes] = static_cast<float>(c.allow);
       g.fixed[lanes] = !moves(sa) || !moves(sb) ? 1.0f : 0.0f;
       g.count[lanes] = static_cast<float>(c.count);
       g.friction = g.friction || c.friction != 0;

@@ -899,6 +899,16 @@ bool World::inertia_follows_turn(int i) const {
   return !(body_flags_[i] & kIsotropic) && s.inv_mass > 0 && s.dq.vec().squaredNorm() > kRowMassTurnSin2;
 }
 
+Real World::overlap_allowance(int a, int b) const {
+  Real thinnest = kInf;
+  for (const int i : {a, b}) {
+    if (kinds_[i] != BodyKind::kDynamic) continue;  // a static sheet may have no thickness
+    const Aabb box = shapes_[i]->local_aabb();
+    thinnest = std::min(thinnest, (box.max - box.min).minCoeff());
+  }
+  return thinnest < kInf ? kOverlapAllowance * thinnest : kInf;
+}
+
 void World::integrate_positions(Real h) {
   inertia_turned_.clear();
   for (const int i : coupled_) {
@@ -1363,6 +1373,7 @@ void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseO
   }
   const Vec3 com_a = positions_[a] + rot_a * masses_[a].local_com;  // world_com
   const Vec3 com_b = positions_[b] + rot_b * masses_[b].local_com;
+  const Real allow = overlap_allowance(a, b);
   const Real mu = combine(settings_.friction_combine, frictions_[a], frictions_[b]);
   const Real e = combine(settings_.restitution_combine, restitutions_[a], restitutions_[b]);
   for (const Manifold& m : out.manifolds) {
@@ -1381,6 +1392,7 @@ void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseO
       c.tangent2 = c.normal.cross(c.tangent1);
     c.friction = mu;
     c.restitution = e;
+    c.allow = allow;
     c.count = m.count;
     const Real rho_a = contact_curvature(*shapes_[a], m.child_a, orientations_[a], m.normal);
     const Real rho_b = contact_curvature(*shapes_[b], m.child_b, orientations_[b], -m.normal);

@@ -134,6 +134,17 @@ struct ContactConstraint {
   /// graph (World: what rests on what under gravity), for the load stiffening of its
   /// normal rows (SolverSettings::max_sag); 0: none known, no stiffening.
   Real load = 0;
+  /// Overlap allowance (m, > 0; +inf: none): past this overlap the biased rows push the
+  /// excess out within the substep, bias min(bias_rate s, (s + allow) / h) under
+  /// push_max, instead of by the spring alone. The spring's sag does not depend on a
+  /// body's size, and where the substep is long it is deep (the spring is capped at a
+  /// quarter of the substep rate, 7.5 Hz at dt 1/30 and one substep, where g / omega^2
+  /// is 4.4 mm; more when pressed or landing), so a thin body could end wholly behind a
+  /// sheet of no thickness (a two-sided mesh) and leave it (measured: a 4 mm plate
+  /// resting on one sank 4.4 mm; now 1.3 mm). World sets it to kOverlapAllowance of
+  /// the thinner moving body's thickness (World::overlap_allowance; kOverlapAllowance
+  /// says what thick bodies feel of it).
+  Real allow = kInf;
   int count = 0;
   std::array<ContactConstraintPoint, 4> points{};
 };
@@ -435,6 +446,8 @@ class WideContacts {
     alignas(32) float ia[6][kLanes] = {}, ib[6][kLanes] = {};
     alignas(32) float n[3][kLanes] = {}, t1[3][kLanes] = {}, t2[3][kLanes] = {};
     alignas(32) float mu[kLanes] = {};
+    /// ContactConstraint::allow (m; 0 for a padding lane, which pushes nothing).
+    alignas(32) float allow[kLanes] = {};
     /// 1 where the lane's constraint has a body that does not move (ContactSoftness::fixed).
     alignas(32) float fixed[kLanes] = {};
     /// The lane's point count (0 for a padding lane): points past it are padding.
