@@ -902,9 +902,9 @@ bool World::inertia_follows_turn(int i) const {
 Real World::overlap_allowance(int a, int b) const {
   Real thinnest = kInf;
   for (const int i : {a, b}) {
-    if (kinds_[i] != BodyKind::kDynamic) continue;  // a static sheet may have no thickness
-    const Aabb box = shapes_[i]->local_aabb();
-    thinnest = std::min(thinnest, (box.max - box.min).minCoeff());
+    // A static sheet may have no thickness; a shape without an inner radius gives none.
+    if (kinds_[i] != BodyKind::kDynamic || !(inner_radius_[i] > 0)) continue;
+    thinnest = std::min(thinnest, 2 * inner_radius_[i]);
   }
   return thinnest < kInf ? kOverlapAllowance * thinnest : kInf;
 }

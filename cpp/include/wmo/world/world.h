@@ -565,8 +565,10 @@ class World {
   /// h v_move (s.v for a body in contact, the substep's mean velocity for a free one).
   void integrate_position(int i, BodyState& s, std::uint8_t f, Real h, const Vec3& v_move);
   /// The overlap allowance of a contact between bodies a and b (m; ContactConstraint::
-  /// allow): kOverlapAllowance of the smallest extent of the moving bodies' local
-  /// bounding boxes (+inf if neither moves).
+  /// allow): kOverlapAllowance of the moving bodies' smaller thickness, taken as twice
+  /// the inner radius (geometry/queries.h: a box's smallest half-extent, a hull's
+  /// distance from its points' mean to its nearest face plane, a compound's thinnest
+  /// child; +inf if neither body moves).
   Real overlap_allowance(int a, int b) const;
   /// One step; with check_state, the state check of step() first (in update_broadphase).
   void run_step(bool check_state);
