@@ -196,8 +196,9 @@ def test_a_thin_plate_under_a_box_landing_on_it_stays_on_a_two_sided_mesh_ground
     assert abs(plate.position[1]) < 0.005
 
 
+@pytest.mark.parametrize("hull", [False, True])
 @pytest.mark.parametrize("load", [0.0, 0.01])
-def test_a_thin_plate_resting_on_a_two_sided_mesh_at_a_long_substep_stays_in_front(load):
+def test_a_thin_plate_resting_on_a_two_sided_mesh_at_a_long_substep_stays_in_front(load, hull):
     # A 1 g plate 4 mm thick resting on a two-sided triangle-mesh ground at dt 1/30 with
     # one substep, alone or under a 10 g box, 10 s. The soft contacts' spring is capped
     # at a quarter of the substep rate (7.5 Hz against the ground) and its sag does not
@@ -207,11 +208,21 @@ def test_a_thin_plate_resting_on_a_two_sided_mesh_at_a_long_substep_stays_in_fro
     # the thinner moving body's thickness out within the substep
     # (ContactConstraint::allow). Its top must stay in front of the sheet at every step
     # (measured: at least 2.5 mm alone, 0.8 mm loaded), and alone it must end less than
-    # half its thickness deep (measured 1.3 mm, the allowance 1 mm).
+    # half its thickness deep (measured 1.3 mm, the allowance 1 mm). The same plate as a
+    # hull whose points are turned 45 degrees about z in its own frame (the body turned
+    # back, so it lies flat) is thin along no local axis: its thickness is taken from its
+    # inner radius, not its local bounding box (7 cm high: an allowance of 18 mm).
     v = [[-5, 0, -5], [5, 0, -5], [5, 0, 5], [-5, 0, 5]]
     w = wmo.World(dt=1 / 30, substeps=1, iterations=1)
     w.add_body(wmo.TriangleMesh(v, [[0, 2, 1], [0, 3, 2]], one_sided=False), kind="static")
-    plate = w.add_body(wmo.Box((0.05, 0.002, 0.05)), position=(0, 0.002, 0), mass=0.001)
+    if hull:
+        c, s = np.cos(np.pi / 4), np.sin(np.pi / 4)
+        turn = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+        corners = np.array([[x, y, z] for x in (-0.05, 0.05) for y in (-0.002, 0.002) for z in (-0.05, 0.05)])
+        plate = w.add_body(wmo.ConvexHull(corners @ turn.T), position=(0, 0.002, 0), mass=0.001,
+                           orientation=(0, 0, -np.sin(np.pi / 8), np.cos(np.pi / 8)))
+    else:
+        plate = w.add_body(wmo.Box((0.05, 0.002, 0.05)), position=(0, 0.002, 0), mass=0.001)
     if load:
         w.add_body(wmo.Box((0.04, 0.04, 0.04)), position=(0, 0.044, 0), mass=load)
     lowest_top = np.inf
