@@ -64,6 +64,7 @@ WMO_INLINE void st(float* p, v8 v) { std::memcpy(p, &v, sizeof v); }
 WMO_INLINE v8 splat(float x) { return v8{x, x, x, x, x, x, x, x}; }
 /// std::max(a, b) lane by lane: (a < b) ? b : a.
 WMO_INLINE v8 vmax(v8 a, v8 b) { return a < b ? b : a; }
+/// std::min(a, b) lane by lane: (a < b) ? a : b.
 WMO_INLINE v8 vmin(v8 a, v8 b) { return a < b ? a : b; }
 /// Square root lane by lane. This file is compiled without errno for the math
 /// functions (CMakeLists.txt), so the loop becomes one vector square root (correctly

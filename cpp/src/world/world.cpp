@@ -904,7 +904,17 @@ Real World::overlap_allowance(int a, int b) const {
   for (const int i : {a, b}) {
     // A static sheet may have no thickness; a shape without an inner radius gives none.
     if (kinds_[i] != BodyKind::kDynamic || !(inner_radius_[i] > 0)) continue;
-    thinnest = std::min(thinnest, 2 * inner_radius_[i]);
+    Real thickness = 2 * inner_radius_[i];
+    if (shapes_[i]->type() == ShapeType::kCompound) {
+      // A compound's inner radius is its thinnest child's, which need not be where it
+      // touches: a rod with a ball at its end, spinning on the ground, had its ball held
+      // to the rod's allowance (2 cm of 8 cm) and the excess pushes added energy
+      // (test_a_rod_spinning_flat_on_the_ground_gains_no_energy). Its bounding box's
+      // smallest extent instead.
+      const Aabb box = shapes_[i]->local_aabb();
+      thickness = (box.max - box.min).minCoeff();
+    }
+    thinnest = std::min(thinnest, thickness);
   }
   return thinnest < kInf ? kOverlapAllowance * thinnest : kInf;
 }

@@ -567,8 +567,8 @@ class World {
   /// The overlap allowance of a contact between bodies a and b (m; ContactConstraint::
   /// allow): kOverlapAllowance of the moving bodies' smaller thickness, taken as twice
   /// the inner radius (geometry/queries.h: a box's smallest half-extent, a hull's
-  /// distance from its points' mean to its nearest face plane, a compound's thinnest
-  /// child; +inf if neither body moves).
+  /// distance from its points' mean to its nearest face plane), for a compound the
+  /// smallest extent of its local bounding box (+inf if neither body moves).
   Real overlap_allowance(int a, int b) const;
   /// One step; with check_state, the state check of step() first (in update_broadphase).
   void run_step(bool check_state);
