@@ -899,20 +899,26 @@ bool World::inertia_follows_turn(int i) const {
   return !(body_flags_[i] & kIsotropic) && s.inv_mass > 0 && s.dq.vec().squaredNorm() > kRowMassTurnSin2;
 }
 
-Real World::overlap_allowance(int a, int b) const {
+Real World::overlap_allowance(int a, int b, int child_a, int child_b) const {
   Real thinnest = kInf;
-  for (const int i : {a, b}) {
+  for (const auto [i, child] : {std::pair{a, child_a}, std::pair{b, child_b}}) {
     // A static sheet may have no thickness; a shape without an inner radius gives none.
     if (kinds_[i] != BodyKind::kDynamic || !(inner_radius_[i] > 0)) continue;
     Real thickness = 2 * inner_radius_[i];
     if (shapes_[i]->type() == ShapeType::kCompound) {
-      // A compound's inner radius is its thinnest child's, which need not be where it
-      // touches: a rod with a ball at its end, spinning on the ground, had its ball held
-      // to the rod's allowance (2 cm of 8 cm) and the excess pushes added energy
-      // (test_a_rod_spinning_flat_on_the_ground_gains_no_energy). Its bounding box's
-      // smallest extent instead.
-      const Aabb box = shapes_[i]->local_aabb();
-      thickness = (box.max - box.min).minCoeff();
+      // A compound's inner radius is its thinnest child's, which need not be the child
+      // that touches: a rod with a ball at its end, spinning on the ground, had its ball
+      // held to the rod's allowance (2 cm of 8 cm) and the excess pushes added energy
+      // (test_a_rod_spinning_flat_on_the_ground_gains_no_energy). The touching child's
+      // own thickness instead; its bounding box's smallest extent where the manifold
+      // names no child.
+      const auto& children = static_cast<const Compound&>(*shapes_[i]).children();
+      if (child >= 0 && child < static_cast<int>(children.size())) {
+        thickness = 2 * inner_radius(*children[child].shape);
+      } else {
+        const Aabb box = shapes_[i]->local_aabb();
+        thickness = (box.max - box.min).minCoeff();
+      }
     }
     thinnest = std::min(thinnest, thickness);
   }
@@ -1383,7 +1389,6 @@ void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseO
   }
   const Vec3 com_a = positions_[a] + rot_a * masses_[a].local_com;  // world_com
   const Vec3 com_b = positions_[b] + rot_b * masses_[b].local_com;
-  const Real allow = overlap_allowance(a, b);
   const Real mu = combine(settings_.friction_combine, frictions_[a], frictions_[b]);
   const Real e = combine(settings_.restitution_combine, restitutions_[a], restitutions_[b]);
   for (const Manifold& m : out.manifolds) {
@@ -1402,7 +1407,7 @@ void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseO
       c.tangent2 = c.normal.cross(c.tangent1);
     c.friction = mu;
     c.restitution = e;
-    c.allow = allow;
+    c.allow = overlap_allowance(a, b, m.child_a, m.child_b);
     c.count = m.count;
     const Real rho_a = contact_curvature(*shapes_[a], m.child_a, orientations_[a], m.normal);
     const Real rho_b = contact_curvature(*shapes_[b], m.child_b, orientations_[b], -m.normal);

@@ -567,9 +567,11 @@ class World {
   /// The overlap allowance of a contact between bodies a and b (m; ContactConstraint::
   /// allow): kOverlapAllowance of the moving bodies' smaller thickness, taken as twice
   /// the inner radius (geometry/queries.h: a box's smallest half-extent, a hull's
-  /// distance from its points' mean to its nearest face plane), for a compound the
-  /// smallest extent of its local bounding box (+inf if neither body moves).
-  Real overlap_allowance(int a, int b) const;
+  /// distance from its points' mean to its nearest face plane), for a compound that of
+  /// the touching child (child_a, child_b: a manifold's child indices; the compound's
+  /// local bounding box's smallest extent where the index is -1). +inf if neither body
+  /// moves.
+  Real overlap_allowance(int a, int b, int child_a, int child_b) const;
   /// One step; with check_state, the state check of step() first (in update_broadphase).
   void run_step(bool check_state);
   /// The stage of that name; returns the count moved. With check_state, also the state
