@@ -289,7 +289,7 @@ class World:
                  threads: int = 1, ccd: bool = True, ccd_motion_threshold: float = 0.5,
                  ccd_penetration: float = 0.05, block_solver: bool = False,
                  centroid_rows: bool = False, energy_guard_passes: int = 0,
-                 energy_guard_tolerance: float = 1e-6) -> None: ...
+                 energy_guard_tolerance: float = 1e-6, broadphase: str = "aabb_tree") -> None: ...
     def add_body(self, shape: Shape, position: npt.ArrayLike | None = None,
                  orientation: npt.ArrayLike | None = None, kind: str = "dynamic",
                  mass: float | None = None, density: float = 1000.0, friction: float = 0.5,

@@ -578,10 +578,9 @@ def _stiff_tower_after(steps):
 
 def test_tower_of_30_stands_for_6000_steps_with_stiff_contacts():
     # A soft contact of f Hz is a spring of stiffness m_eff (2 pi f)^2 per point, so a
-    # tower of N unit boxes is an inverted pendulum on springs: it buckles unless
-    # 2 pi f exceeds about 2 N sqrt(g) at its base (30 Hz at N = 30; the defaults, 36
-    # Hz, still buckle it, see the xfail below). 8 substeps allow 120 Hz (a quarter of
-    # the substep rate). "Stands": after 6000 steps every box is within 5 cm (5% of its
+    # tower of N unit boxes is an elastic column: it buckles below Greenhill's critical
+    # frequency (83 Hz at N = 30, _greenhill_hertz; the defaults, 36 Hz, buckle it, see
+    # the xfail below). 8 substeps allow 120 Hz (a quarter of the substep rate). "Stands": after 6000 steps every box is within 5 cm (5% of its
     # size) of where it started and upright within 0.5 degrees. Measured: 3.2 cm at
     # most, 2.8 of it sideways: the tower sways (next test), so the 1 cm a rigid tower
     # would allow is not met. The sag follows the springs: 900 g / (2 pi f)^2

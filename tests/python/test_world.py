@@ -163,6 +163,7 @@ def test_bad_body_raises_and_adds_nothing(kwargs, field):
     (dict(energy_guard_passes=-1), "energy_guard_passes"),
     (dict(energy_guard_tolerance=float("nan")), "energy_guard_tolerance"),
     (dict(energy_guard_tolerance=-1e-6), "energy_guard_tolerance"),
+    (dict(broadphase="octree"), "broadphase.*octree"),
 ])
 def test_bad_settings_raise(kwargs, field):
     with pytest.raises(ValueError, match=field):
@@ -530,11 +531,13 @@ def test_filtered_pairs_lists_each_filtered_pair_once():
 
 
 def test_settings_rebuild_an_equal_world():
-    w = wmo.World(gravity=(1, 2, 3), dt=0.01, substeps=3, friction_combine="average", ccd=False, threads=2)
+    w = wmo.World(gravity=(1, 2, 3), dt=0.01, substeps=3, friction_combine="average", ccd=False, threads=2,
+                  broadphase="sweep_and_prune")
     w2 = wmo.World(**w.settings)
     assert w2.settings.keys() == w.settings.keys()
     assert all(np.array_equal(w2.settings[k], v) for k, v in w.settings.items())
     assert w.settings["friction_combine"] == "average" and w.settings["threads"] == 2
+    assert w.settings["broadphase"] == "sweep_and_prune" and wmo.World().settings["broadphase"] == "aabb_tree"
 
 
 @pytest.mark.parametrize("kw", [dict(inertia=(1, 1, 3)), dict(inertia=(0, 1, 1)), dict(inertia=(1, np.nan, 1)),
@@ -652,3 +655,43 @@ def test_contacts_with_triangles_256_apart_keep_their_own_cache_entries():
     reference = run(0)
     for pad in (255, 511):
         np.testing.assert_allclose(run(pad), reference, rtol=0, atol=1e-12)
+
+
+def _ccd_scene(broadphase):
+    # Fast CCD balls fired at a thin static plate and at a triangle-mesh floor, a
+    # kinematic bat sweeping through them, and resting boxes: every path that asks the
+    # broadphase (pairs, the CCD sweeps' box queries, kinematic and static margins).
+    w = wmo.World(broadphase=broadphase, sleeping=False)
+    v = [(-5, 0, -5), (5, 0, -5), (5, 0, 5), (-5, 0, 5)]
+    w.add_body(wmo.TriangleMesh(v, [(0, 2, 1), (0, 3, 2)]), kind="static")
+    w.add_body(wmo.Box((1, 0.005, 1)), position=(0, 2, 0), kind="static")
+    w.add_body(wmo.Box((0.05, 0.5, 0.5)), position=(-4, 0.6, 2), kind="kinematic", linear_velocity=(20, 0, 0))
+    for k in range(6):
+        w.add_body(wmo.Sphere(0.05), position=(0.3 * k - 0.8, 4, 0.1 * k), linear_velocity=(0, -300, 0), ccd=True)
+        w.add_body(wmo.Box((0.2, 0.2, 0.2)), position=(1.2 * k - 3, 0.2, 2), friction=0.5)
+    return w
+
+
+@pytest.mark.parametrize("scene", ["boxes3000", "mixed_pile", "ccd"])
+def test_every_broadphase_gives_the_same_world(scene):
+    # The three broadphases report the same pairs in the same order (the broadphase
+    # tests), so the world steps to bit-identical states whichever one finds them:
+    # boxes3000 while its layers land (200 steps), the mixed pile (spheres, capsules,
+    # hulls, compounds) and the CCD scene above.
+    def run(bp):
+        if scene == "ccd":
+            w, steps = _ccd_scene(bp), 60
+        elif scene == "boxes3000":
+            w, steps = wmo.scenes.boxes3000(broadphase=bp, sleeping=False), 200
+        else:
+            w, steps = wmo.scenes.mixed_pile(broadphase=bp, sleeping=False), 300
+        w.step(steps)
+        assert w.settings["broadphase"] == bp
+        if scene == "ccd":
+            assert w.profile["ccd"]["total_count"] > 0 and w.contact_count > 0
+        return [np.array(a) for a in (w.positions, w.orientations, w.linear_velocities, w.angular_velocities)]
+
+    tree = run("aabb_tree")
+    for bp in ("sweep_and_prune", "brute_force"):
+        for x, y in zip(tree, run(bp)):
+            np.testing.assert_array_equal(x, y)

@@ -86,6 +86,13 @@ CombineRule combine_rule_from_string(const std::string& s, const char* field) {
                         " must be one of 'multiply', 'geometric_mean', 'max', 'min', 'average', got '" + s + "'");
 }
 
+BroadphaseType broadphase_from_string(const std::string& s, const char* field) {
+  for (const BroadphaseType t : {BroadphaseType::kAabbTree, BroadphaseType::kSweepAndPrune, BroadphaseType::kBruteForce})
+    if (s == to_string(t)) return t;
+  throw InvalidArgument(std::string(field) + " must be one of 'aabb_tree', 'sweep_and_prune', 'brute_force', got '" +
+                        s + "'");
+}
+
 const char* to_string(CombineRule r) {
   switch (r) {
     case CombineRule::kMultiply:
@@ -901,7 +908,7 @@ bool World::inertia_follows_turn(int i) const {
 
 Real World::overlap_allowance(int a, int b, int child_a, int child_b) const {
   Real thinnest = kInf;
-  for (const auto [i, child] : {std::pair{a, child_a}, std::pair{b, child_b}}) {
+  for (const auto& [i, child] : {std::pair{a, child_a}, std::pair{b, child_b}}) {
     // A static sheet may have no thickness; a shape without an inner radius gives none.
     if (kinds_[i] != BodyKind::kDynamic || !(inner_radius_[i] > 0)) continue;
     Real thickness = 2 * inner_radius_[i];

@@ -52,6 +52,9 @@ enum class CombineRule : std::uint8_t {
 /// The rule named `s` ("multiply", "geometric_mean", "max", "min", "average"); any other
 /// name raises InvalidArgument naming `field` (the setting being parsed) and the value.
 CombineRule combine_rule_from_string(const std::string& s, const char* field = "combine rule");
+/// The broadphase named as to_string(BroadphaseType) names it ("aabb_tree",
+/// "sweep_and_prune", "brute_force"); throws InvalidArgument naming `field` otherwise.
+BroadphaseType broadphase_from_string(const std::string& s, const char* field = "broadphase");
 const char* to_string(CombineRule r);
 Real combine(CombineRule rule, Real a, Real b);
 
@@ -245,6 +248,10 @@ struct WorldSettings {
   /// (without it, w is constant in free flight, which is what a sphere does and what
   /// games usually want).
   bool gyroscopic = false;
+  /// The broadphase algorithm (collision/broadphase.h). Each reports the same pairs
+  /// in the same order, so the choice changes the cost, never the result: the dynamic
+  /// tree (the default) for scenes that move, sweep and prune where bodies are spread
+  /// along one axis, brute force (O(N^2) a step) as the reference.
   BroadphaseType broadphase = BroadphaseType::kAabbTree;
   /// Threads for the step's parallel stages, the caller's included: the narrowphase,
   /// and on a pile of at least 8,192 contact constraints the solver's passes (its
