@@ -185,7 +185,7 @@ def test_every_world_setting_can_be_set_remotely():
            "speculative_motion_static": 0.0, "manifold_reuse_angle": 0.01, "friction_combine": "max",
            "restitution_combine": "average", "sleep_linear_threshold": 0.1, "time_to_sleep": 1.5,
            "ccd_motion_threshold": 0.25, "ccd_penetration": 0.1, "energy_guard_passes": 8,
-           "energy_guard_tolerance": 1e-5}
+           "energy_guard_tolerance": 1e-5, "broadphase": "sweep_and_prune"}
     m.apply("set_settings", new)
     for k, v in new.items():
         assert m.world.settings[k] == v, k

@@ -1398,6 +1398,10 @@ void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseO
   const Vec3 com_b = positions_[b] + rot_b * masses_[b].local_com;
   const Real mu = combine(settings_.friction_combine, frictions_[a], frictions_[b]);
   const Real e = combine(settings_.restitution_combine, restitutions_[a], restitutions_[b]);
+  // The pair's overlap allowance; a compound's depends on the child each manifold touches.
+  const bool per_child =
+      shapes_[a]->type() == ShapeType::kCompound || shapes_[b]->type() == ShapeType::kCompound;
+  const Real pair_allow = per_child ? kInf : overlap_allowance(a, b, -1, -1);
   for (const Manifold& m : out.manifolds) {
     if (m.count == 0) continue;
     const ManifoldKey key = manifold_key(sa, sb, m.child_a, m.child_b);
@@ -1414,7 +1418,7 @@ void World::collide_pair(int sa, int sb, int a, int b, Real margin, NarrowphaseO
       c.tangent2 = c.normal.cross(c.tangent1);
     c.friction = mu;
     c.restitution = e;
-    c.allow = overlap_allowance(a, b, m.child_a, m.child_b);
+    c.allow = per_child ? overlap_allowance(a, b, m.child_a, m.child_b) : pair_allow;
     c.count = m.count;
     const Real rho_a = contact_curvature(*shapes_[a], m.child_a, orientations_[a], m.normal);
     const Real rho_b = contact_curvature(*shapes_[b], m.child_b, orientations_[b], -m.normal);

@@ -41,7 +41,7 @@ SETTINGS: dict[str, type] = {
     "friction_combine": str, "restitution_combine": str, "sleeping": bool,
     "sleep_linear_threshold": float, "sleep_angular_threshold": float, "time_to_sleep": float,
     "gyroscopic": bool, "ccd": bool, "ccd_motion_threshold": float, "ccd_penetration": float,
-    "threads": int,
+    "threads": int, "broadphase": str,
     # The scene's, not a World keyword: pairs of collision groups [a, b] (0..63) whose
     # bodies do not collide (World.set_group_collision(a, b, False)); every other pair of
     # groups collides.
