@@ -917,15 +917,10 @@ Real World::overlap_allowance(int a, int b, int child_a, int child_b) const {
       // that touches: a rod with a ball at its end, spinning on the ground, had its ball
       // held to the rod's allowance (2 cm of 8 cm) and the excess pushes added energy
       // (test_a_rod_spinning_flat_on_the_ground_gains_no_energy). The touching child's
-      // own thickness instead; its bounding box's smallest extent where the manifold
-      // names no child.
+      // own thickness instead (dispatch names it in every compound manifold).
       const auto& children = static_cast<const Compound&>(*shapes_[i]).children();
-      if (child >= 0 && child < static_cast<int>(children.size())) {
+      if (child >= 0 && child < static_cast<int>(children.size()))
         thickness = 2 * inner_radius(*children[child].shape);
-      } else {
-        const Aabb box = shapes_[i]->local_aabb();
-        thickness = (box.max - box.min).minCoeff();
-      }
     }
     thinnest = std::min(thinnest, thickness);
   }

@@ -575,8 +575,8 @@ class World {
   /// allow): kOverlapAllowance of the moving bodies' smaller thickness, taken as twice
   /// the inner radius (geometry/queries.h: a box's smallest half-extent, a hull's
   /// distance from its points' mean to its nearest face plane), for a compound that of
-  /// the touching child (child_a, child_b: a manifold's child indices; the compound's
-  /// local bounding box's smallest extent where the index is -1). +inf if neither body
+  /// the touching child (child_a, child_b: a manifold's child indices; -1, which no
+  /// compound manifold carries, leaves its thinnest child's). +inf if neither body
   /// moves.
   Real overlap_allowance(int a, int b, int child_a, int child_b) const;
   /// One step; with check_state, the state check of step() first (in update_broadphase).
