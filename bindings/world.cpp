@@ -204,14 +204,16 @@ energy_guard_passes : most relax passes added to a substep that left the bodies 
 energy_guard_tolerance : relative energy rise a substep may keep (default 1e-6: above
     the single-precision solver lanes' rounding).
 block_solver : solve each contact pair's normal rows together (a small LCP per pair, on
-    the scalar double-precision solver, about 4x the solve stage's time; default False). Stacks
-    come to rest where the rows alone keep them swaying, and tall towers stand about
-    ten times longer before they buckle.
+    the scalar double-precision solver, about 4x the solve stage's time; default False). The
+    passes treat a contact's points alike, so a perfectly stacked tower stays on its axis
+    where the rows alone rock it; the springs are no stiffer: a kicked tower falls above
+    the same height (17 unit boxes at the defaults).
 centroid_rows : give each contact pair a centroid row before its point rows: one
     impulse at all its points that meets their targets on average, so the passes stop
     handing a contact's first point the whole correction and the opposite point the
-    reaction, a torque that rocks stacks (default False). A 20-box tower then stands
-    at the defaults (it falls without); it costs a fifth more time per pyramid step.
+    reaction, a torque that rocks stacks (default False). Like block_solver it keeps a
+    perfectly stacked tower on its axis without stiffening the springs (a kicked tower
+    falls above 17 unit boxes either way); it costs a fifth more time per pyramid step.
 contact_hertz, contact_damping_ratio, contact_push_max : the soft contact spring
     (Hz, ratio, m/s), defaults 36, 10, 3 (chosen on the pyramid and boxes3000 together:
     see SolverSettings in contact_solver.h).

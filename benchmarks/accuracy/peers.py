@@ -20,6 +20,9 @@ import numpy as np
 from wmo import scenes
 
 G = 10.0
+#: Sideways speed (m/s) given to a stack's top box at the start (run.py's stack cases):
+#: the perturbation that tells a standing stack from an unstable equilibrium.
+KICK = 0.01
 
 
 #: The stacked-box cases of run.py: (boxes, simulated seconds); pyramid10 runs 5 s.
@@ -117,6 +120,8 @@ def pybullet_case(case: str, dt: float, iterations: int):
                 pos, masses, friction = [tuple(p) for p in spec.positions], list(spec.masses), spec.friction
             w.ground(friction)
             ids = [w.box((0.5, 0.5, 0.5), p, m, friction) for p, m in zip(pos, masses)]
+            if case in STACKS:
+                w.pb.resetBaseVelocity(ids[-1], [KICK, 0, 0], [0, 0, 0], physicsClientId=w.cid)
             p0 = np.array([w.pos(b) for b in ids])
             ms = w.run(seconds)
             p1 = np.array([w.pos(b) for b in ids])
@@ -170,7 +175,9 @@ def mujoco_case(case: str, dt: float, iterations: int):
             spec = scenes.pyramid_spec(10)
             pos, masses = [tuple(map(float, p)) for p in spec.positions], [float(m) for m in spec.masses]
         xml = _mujoco_boxes(pos, masses, 0.6, dt, iterations)
-        ms, model, data = _mujoco_run(xml, seconds, dt)
+        # A free joint's qvel is (linear, angular) per body: the top box's x speed.
+        kick = (lambda d: d.qvel.__setitem__(6 * (n - 1), KICK)) if case in STACKS else None
+        ms, model, data = _mujoco_run(xml, seconds, dt, init=kick)
         p1 = data.qpos.reshape(-1, 7)[:, :3]
         return ms, float(np.linalg.norm(p1 - np.array(pos), axis=1).max())
     return None

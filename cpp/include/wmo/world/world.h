@@ -95,11 +95,14 @@ struct WorldSettings {
   /// turning anchors' share, so a converged substep adds no pass.
   Real energy_guard_tolerance = 1e-6;
   /// Solve each manifold's normal rows together (NormalRows::kBlock: a small LCP per
-  /// contact pair, exact in one pass) instead of one row after another. Stacks then
-  /// come to rest where the rows alone keep them swaying: the 30-box tower at 8
-  /// substeps and 120 Hz is still to 1e-13 m from step 600 to 6000 (the rows: 1.5 cm),
-  /// and a tall tower at the defaults stands about ten times longer before it buckles
-  /// (20 boxes: ~4000 steps instead of ~400). The passes then run on the scalar,
+  /// contact pair, exact in one pass) instead of one row after another. The passes then
+  /// treat a contact's points alike, so a perfectly stacked tower stays on its axis (the
+  /// rows alone rock it: each contact's first point takes the correction, the opposite
+  /// one the reaction) and an unkicked stiff 30-box tower (8 substeps, 120 Hz) is still
+  /// to 1e-13 m where the rows keep it swaying 1.5 cm. They do not stiffen the springs: a
+  /// kicked tower falls above the same critical height (17 unit boxes at the defaults,
+  /// Greenhill's, SolverSettings::contact_hertz) and keeps swaying, its sway decaying
+  /// over about 100 s (test_stability.py). The passes run on the scalar,
   /// double-precision solver, not WideContacts' 8-wide lanes: about 4x the solve
   /// stage's time (pyramid: 143 against 35 ms a step; `wmo bench pyramid
   /// --block-solver`). Off by default.
@@ -108,14 +111,14 @@ struct WorldSettings {
   /// contact_solver.cpp): one impulse increment at all its points that meets their
   /// targets on average, so the Gauss-Seidel passes stop handing each contact's first
   /// point the whole correction and its opposite point the reaction, a torque that
-  /// rocks stacks. A 20-box tower of unit boxes then stands at the defaults (without:
-  /// a box is 0.5 m off by step ~400, and it falls), and a stiff 30-box tower (8
-  /// substeps, 120 Hz) sways half as far. Off by default for its cost: a fifth more
-  /// time per pyramid step (measured, median of 3 runs of 600 steps: 44.6 against 37.1
-  /// ms, 1.76x PyBullet's speed instead of 2.17x; `wmo bench pyramid --engines
-  /// wmo,pybullet --repeats 3 [--centroid-rows]`). Towers of 30 boxes still buckle at 4
-  /// substeps either way: their springs are too soft for their height
-  /// (SolverSettings::max_sag).
+  /// rocks stacks. A perfectly stacked tower then stays on its axis (unkicked, even 28
+  /// unit boxes at the defaults, an unstable equilibrium), and a stiff 30-box tower (8
+  /// substeps, 120 Hz) sways less. It does not stiffen the springs: a kicked tower falls
+  /// above the same critical height as with the rows alone (17 unit boxes at the
+  /// defaults, SolverSettings::contact_hertz; test_stability.py). Off by default for its
+  /// cost: a fifth more time per pyramid step (measured, median of 3 runs of 600 steps:
+  /// 44.6 against 37.1 ms, 1.76x PyBullet's speed instead of 2.17x; `wmo bench pyramid
+  /// --engines wmo,pybullet --repeats 3 [--centroid-rows]`).
   bool centroid_rows = false;
   SolverSettings solver{};
   /// Speculative margin at rest (unit: m): contacts are created for pairs closer than
