@@ -162,7 +162,7 @@ inline void record_push(ContactConstraintPoint& p, Real impulse, Real vn, Real s
 /// degrees of freedom, a push and two tilts), so its rigid system has a line of
 /// solutions; 1e-6 picks the one nearest the minimum-norm impulses and moves the
 /// velocities it reaches by 1e-6 relative, far below the passes' convergence.
-/// (Measured, stiff 30-box tower: 1e-9, 1e-6 and 1e-3 all bring it to rest.)
+/// (Measured, stiff 30-box tower, unkicked: 1e-9, 1e-6 and 1e-3 all bring it to rest.)
 constexpr Real kBlockRegularisation = 1e-6;
 
 /// w_i >= -kBlockSlack (|rhs_i| + 1e-12 m/s) counts as w_i >= 0 when an active set is
@@ -288,9 +288,11 @@ bool solve_normal_block(ContactConstraint& c, BodyState& a, BodyState& b, const 
 /// Why: a Gauss-Seidel pass over a manifold's points alone gives the first point the
 /// whole correction and its diagonal opposite the reaction (measured, a box on a box
 /// after one step: 1.9x the first point's impulse at the third), a torque that the
-/// passes' fixed order repeats every substep; it rocks a stack until it falls (a 20-box
-/// tower at the defaults, by step ~1000; with the centroid row it stands). The
-/// centroid row is symmetric in the points.
+/// passes' fixed order repeats every substep; it rocks a stack (a 20-box tower at the
+/// defaults falls by step ~1000 without being touched; with the centroid row it stays
+/// on its axis). The centroid row is symmetric in the points. It does not make the
+/// springs stiffer: a tower above Greenhill's critical height is then an unstable
+/// equilibrium, and a kick topples it as it does without the row (test_stability.py).
 ///
 /// With K the rows' coupling (K_ij: normal velocity at i per unit impulse at j) and
 /// g_i = K_ii (1 / mass_scale_i - 1) = K_ii / (stiffening_i a2) each soft row's
