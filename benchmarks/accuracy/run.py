@@ -128,10 +128,7 @@ def case_slide(s):
 
 
 def case_stack(s, n=10, seconds=5.0):
-    w = scenes.tower(n, sleeping=False, **world_settings(s))
-    v = w.linear_velocities
-    v[-1, 0] = KICK
-    del v
+    w = scenes.tower(n, sleeping=False, kick=KICK, **world_settings(s))
     p0 = np.array(w.positions)
     ms, _ = run_for(w, seconds, s["dt"])
     return ms, float(np.linalg.norm(w.positions - p0, axis=1).max())

@@ -82,6 +82,10 @@ def test_tower_and_mixed_pile():
     rows = dynamic_rows(w)
     assert len(rows) == 30
     np.testing.assert_allclose(w.positions[rows][:, 1], 0.5 + np.arange(30))
+    assert not w.linear_velocities.any()  # at rest unless kicked
+    kicked = scenes.tower(height=3, kick=0.01)
+    rows = dynamic_rows(kicked)
+    np.testing.assert_array_equal(kicked.linear_velocities[rows], [[0, 0, 0], [0, 0, 0], [0.01, 0, 0]])
     a = scenes.mixed_pile(count=60, seed=3)
     b = scenes.mixed_pile(count=60, seed=3)
     np.testing.assert_array_equal(a.positions, b.positions)  # deterministic by seed
@@ -94,6 +98,7 @@ def test_tower_and_mixed_pile():
 @pytest.mark.parametrize("call", [lambda: scenes.boxes3000(layers=0),
                                   lambda: scenes.pyramid(layers=0),
                                   lambda: scenes.tower(height=0),
+                                  lambda: scenes.tower(kick=float("nan")),
                                   lambda: scenes.mixed_pile(count=0)])
 def test_bad_scene_sizes_raise(call):
     with pytest.raises(ValueError):
