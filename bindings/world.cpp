@@ -189,7 +189,9 @@ substeps : soft-step substeps per step (default 4): more give stiffer contacts.
     substeps; within 5 cm at substeps=8, contact_hertz=120).
 iterations : velocity iterations per substep (default 1).
 relax_iterations : relax passes per substep, alternately forward and backward over the
-    contacts (default 2).
+    contacts (default 2). They take the approach out of the velocities inelastically, so
+    they are what damps a stack's sway; two do not converge over a tall chain: a kicked
+    30-box tower (8 substeps, 120 Hz) sways for minutes, and comes to rest with 10.
 energy_guard_passes : most relax passes added to a substep that left the bodies in
     contact with more kinetic energy than before the contact solve (default 0: off; 8
     takes back what the tests measured).
