@@ -741,7 +741,8 @@ def test_load_stiffening_is_checked_and_off_by_default():
                    "iterations, 6.5x the step. The peers, kicked the same way (benchmarks/accuracy/run.py "
                    "--cases tower30, 20 s): PyBullet and MuJoCo topple it at their defaults too (30 and 31 m "
                    "at dt 1/60); MuJoCo holds it from dt 1/120 (7.1 cm, 14.7 ms a simulated second), PyBullet "
-                   "from dt 1/960 (7.9 cm, 92 ms), WMO at 8 substeps and 120 Hz (4.1 cm, 15.1 ms)")
+                   "from dt 1/960 (7.9 cm, 92 ms), WMO from 6 substeps at the cap, 90 Hz (5.6 cm, 11.1 ms; 8 "
+                   "substeps and 120 Hz: 4.1 cm, 14-15 ms)")
 def test_tower_of_30_stands_for_6000_steps_at_the_defaults():
     w = _kicked_tower(30)
     p0 = np.array(w.positions)
