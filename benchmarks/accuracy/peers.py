@@ -25,8 +25,21 @@ G = 10.0
 KICK = 0.01
 
 
-#: The stacked-box cases of run.py: (boxes, simulated seconds); pyramid10 runs 5 s.
+#: The stacked-box cases of run.py: (boxes, simulated seconds).
 STACKS = {"stack10": (10, 5.0), "tower30": (30, 20.0)}
+#: The pyramid cases: layers; each runs 5 s.
+PYRAMIDS = {"pyramid10": 10, "pyramid": 20}
+#: The cases run through wmo.bench's engine drivers: (scene spec, simulated seconds).
+BENCH_SCENES = {"boxes3000": (scenes.boxes3000_spec, 10.0)}
+
+
+def bench_scene_case(engine: str, spec, seconds: float, dt: float, iterations: int):
+    """(ms per simulated second, deepest penetration in m) of `spec` in `engine` through
+    wmo.bench's drivers (the same build of the scene as `wmo bench`; steps timed alone)."""
+    from wmo import bench
+
+    run = bench.RUNNERS[engine](spec, max(1, round(seconds / dt)), dt, iterations, 1, False)
+    return sum(run.step_times()) * 1e3 / seconds, max(r.max_penetration for r in run.records)
 
 
 # ---- PyBullet --------------------------------------------------------------------------
@@ -85,6 +98,9 @@ class _Bullet:
 
 
 def pybullet_case(case: str, dt: float, iterations: int):
+    if case in BENCH_SCENES:
+        spec, seconds = BENCH_SCENES[case]
+        return bench_scene_case("pybullet", spec(), seconds, dt, iterations)
     w = _Bullet(dt, iterations)
     try:
         if case == "bounce":
@@ -109,14 +125,14 @@ def pybullet_case(case: str, dt: float, iterations: int):
             b = w.box((0.5, 0.5, 0.5), (0, 0.5, 0), 1000.0, 0.5, velocity=(v0, 0, 0))
             ms = w.run(3.0)
             return ms, abs(w.pos(b)[0] - v0 * v0 / (2 * mu * G))
-        if case in STACKS or case == "pyramid10":
+        if case in STACKS or case in PYRAMIDS:
             n, seconds = STACKS.get(case, (0, 5.0))
             if case in STACKS:
                 pos = [(0.0, 0.5 + k, 0.0) for k in range(n)]
                 masses = [1000.0] * n
                 friction = math.sqrt(0.6)
             else:
-                spec = scenes.pyramid_spec(10)
+                spec = scenes.pyramid_spec(PYRAMIDS[case])
                 pos, masses, friction = [tuple(p) for p in spec.positions], list(spec.masses), spec.friction
             w.ground(friction)
             ids = [w.box((0.5, 0.5, 0.5), p, m, friction) for p, m in zip(pos, masses)]
@@ -167,12 +183,15 @@ def mujoco_case(case: str, dt: float, iterations: int):
         xml = _mujoco_boxes([(0.0, 0.5, 0.0)], [1000.0], mu, dt, iterations)
         ms, _, data = _mujoco_run(xml, 3.0, dt, init=lambda d: d.qvel.__setitem__(0, v0))
         return ms, abs(float(data.qpos[0]) - v0 * v0 / (2 * mu * G))
-    if case in STACKS or case == "pyramid10":
+    if case in BENCH_SCENES:
+        spec, seconds = BENCH_SCENES[case]
+        return bench_scene_case("mujoco", spec(), seconds, dt, iterations)
+    if case in STACKS or case in PYRAMIDS:
         n, seconds = STACKS.get(case, (0, 5.0))
         if case in STACKS:
             pos, masses = [(0.0, 0.5 + k, 0.0) for k in range(n)], [1000.0] * n
         else:
-            spec = scenes.pyramid_spec(10)
+            spec = scenes.pyramid_spec(PYRAMIDS[case])
             pos, masses = [tuple(map(float, p)) for p in spec.positions], [float(m) for m in spec.masses]
         xml = _mujoco_boxes(pos, masses, 0.6, dt, iterations)
         # A free joint's qvel is (linear, angular) per body: the top box's x speed.

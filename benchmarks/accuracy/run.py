@@ -23,6 +23,11 @@ Cases (the error is in metres or a relative number, as stated):
            SolverSettings::contact_hertz), so this is where the knobs' cost to hold a
            tall stack shows, next to the peers' (a fallen tower: tens of metres).
   pyramid10  the SCENES.md pyramid with 10 layers (385 boxes), 5 s: the same measure.
+  pyramid  the SCENES.md pyramid itself (20 layers, 2870 boxes), 5 s: the same measure.
+  boxes3000  the SCENES.md scene (3008 boxes falling onto the ground), 10 s (600 steps at the
+           default dt): the deepest penetration seen after any step (m), the scene's measure
+           of accuracy in `wmo bench`; the peers run through wmo.bench's drivers (MuJoCo
+           with PGS, as `wmo bench`).
   energy   20 spheres and 20 boxes fired around a closed box of static walls, no gravity,
            friction, restitution or damping, 10 s: the largest one-step rise of the
            kinetic energy, relative (inelastic contacts should only remove energy; WMO
@@ -157,6 +162,20 @@ def case_pyramid(s, layers=10):
     return ms, float(np.linalg.norm(w.positions - p0, axis=1).max())
 
 
+def case_boxes3000(s, layers=47, seconds=10.0):
+    # Timed by the steps alone, as wmo.bench times every engine (the peers' penetration
+    # queries are not cheap).
+    w = scenes.boxes3000(layers, sleeping=False, **world_settings(s))
+    n = max(1, round(seconds / s["dt"]))
+    spent, deepest = 0.0, 0.0
+    for _ in range(n):
+        t0 = time.perf_counter()
+        w.step()
+        spent += time.perf_counter() - t0
+        deepest = max(deepest, w.max_penetration)
+    return spent * 1e3 / seconds, deepest
+
+
 def case_energy(s):
     w = scenes.closed_box(**world_settings(s))
     state = {"e": w.kinetic_energy(), "rise": 0.0}
@@ -173,6 +192,8 @@ def case_energy(s):
 CASES = {"bounce": (case_bounce, "relative error of e^2 h"), "slide": (case_slide, "stopping distance error (m)"),
          "stack10": (case_stack, "largest displacement (m)"),
          "tower30": (case_tower, "largest displacement (m)"), "pyramid10": (case_pyramid, "largest displacement (m)"),
+         "pyramid": (lambda s: case_pyramid(s, layers=20), "largest displacement (m)"),
+         "boxes3000": (case_boxes3000, "deepest penetration (m)"),
          "energy": (case_energy, "largest one-step energy rise (relative)")}
 
 
