@@ -34,7 +34,8 @@ Cases (the error is in metres or a relative number, as stated):
            only: the peers' defaults are not such a closed system).
 
 Writes results/accuracy/accuracy.csv (one row per engine, case and setting) and one PNG
-per case (error against cost, one series per engine and knob; a peer that is not
+per case (error against cost, one series per engine and knob, and each engine's Pareto
+front over all its settings as a broad pale line; a peer that is not
 installed is skipped and said so). Usage:
 .venv/bin/python benchmarks/accuracy/run.py [--out DIR] [--quick] [--no-peers] [--cases tower30,...]
 """
@@ -92,6 +93,16 @@ COMBINED = {"substeps_at_cap": (lambda v: {"substeps": v, "contact_hertz": 0.25 
 def setting(knob, value):
     """DEFAULT with one knob, or one combined knob (COMBINED), set to `value`."""
     return dict(DEFAULT, **(COMBINED[knob][0](value) if knob in COMBINED else {knob: value}))
+
+
+def pareto_front(points):
+    """The (cost, error) points that no other point beats in both, by increasing cost: each
+    kept point has a lower error than every cheaper one."""
+    front = []
+    for cost, err in sorted(points):
+        if not front or err < front[-1][1]:
+            front.append((cost, err))
+    return front
 
 
 def world_settings(s):
@@ -289,6 +300,15 @@ def main() -> None:
                 for x, y, v in pts:
                     label = f"1/{round(1 / v)}" if knob == "dt" else f"{v:g}"
                     ax.annotate(label, (x, max(y, 1e-16)), fontsize=6, xytext=(3, 3), textcoords="offset points")
+        # Each engine's Pareto front over all its settings: the points that no cheaper one
+        # matches in error (the best error each cost buys).
+        colours = {"wmo": "tab:blue", "pybullet": "tab:orange", "mujoco": "tab:green"}
+        for engine in engines:
+            front = pareto_front([(r["ms_per_sim_second"], r["error"]) for r in rows
+                                  if r["engine"] == engine and r["case"] == case])
+            if len(front) > 1:
+                ax.plot([p[0] for p in front], [max(p[1], 1e-16) for p in front], color=colours[engine],
+                        linewidth=6, alpha=0.2, solid_capstyle="round", label=f"{engine} Pareto front")
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlabel("cost: wall ms per simulated second")

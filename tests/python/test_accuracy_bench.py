@@ -116,6 +116,13 @@ def test_boxes3000_and_pyramid_cases_measure_wmo_and_the_peers():
         assert ms > 0 and 0 <= deepest < 0.5
 
 
+def test_pareto_front_keeps_the_points_no_cheaper_one_matches():
+    run = _load("run")
+    pts = [(3.0, 0.5), (1.0, 2.0), (2.0, 1.0), (2.5, 1.5), (4.0, 0.5), (5.0, 0.1)]
+    assert run.pareto_front(pts) == [(1.0, 2.0), (2.0, 1.0), (3.0, 0.5), (5.0, 0.1)]
+    assert run.pareto_front([]) == []
+
+
 def test_unknown_case_is_refused():
     out = subprocess.run([sys.executable, str(ROOT / "benchmarks/accuracy/run.py"), "--cases", "tower31",
                           "--no-peers", "--out", "/nonexistent-never-written"],
