@@ -135,9 +135,10 @@ def pybullet_case(case: str, dt: float, iterations: int):
                 spec = scenes.pyramid_spec(PYRAMIDS[case])
                 pos, masses, friction = [tuple(p) for p in spec.positions], list(spec.masses), spec.friction
             w.ground(friction)
-            ids = [w.box((0.5, 0.5, 0.5), p, m, friction) for p, m in zip(pos, masses)]
-            if case in STACKS:
-                w.pb.resetBaseVelocity(ids[-1], [KICK, 0, 0], [0, 0, 0], physicsClientId=w.cid)
+            # A stack's top box kicked sideways (KICK), as in run.py.
+            kicked = len(pos) - 1 if case in STACKS else -1
+            ids = [w.box((0.5, 0.5, 0.5), p, m, friction, velocity=(KICK, 0, 0) if k == kicked else None)
+                   for k, (p, m) in enumerate(zip(pos, masses))]
             p0 = np.array([w.pos(b) for b in ids])
             ms = w.run(seconds)
             p1 = np.array([w.pos(b) for b in ids])
