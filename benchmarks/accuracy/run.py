@@ -52,9 +52,13 @@ import numpy as np
 import wmo
 from wmo import scenes
 
+# The peers' cases (peers.py, beside this file), and the kick WMO's stack cases share with
+# them: one value, so that every engine's stack gets the same perturbation.
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import peers  # noqa: E402
+
 G = 10.0
-#: Sideways speed (m/s) given to a stack's top box at the start, as peers.KICK gives it.
-KICK = 0.01
+KICK = peers.KICK
 #: Wall seconds after which a sweep's remaining (dearer) settings are skipped.
 BUDGET_S = 60.0
 DEFAULT = {"dt": 1 / 60, "substeps": 4, "iterations": 1, "speculative_motion": 0.0,
@@ -263,9 +267,6 @@ def main() -> None:
             sweep("wmo", case, knob, values, lambda value: (setting(knob, value), *fn(setting(knob, value))))
     engines = ["wmo"]
     if not args.no_peers:
-        sys.path.insert(0, str(Path(__file__).resolve().parent))
-        import peers
-
         for engine, run_case in peers.ENGINES.items():
             try:
                 __import__(engine)
